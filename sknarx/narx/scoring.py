@@ -1,0 +1,54 @@
+"""Free-run scoring for cross-validation over held-out speeds."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .freerun import FreeRunDivergenceError
+from .sweep_data import read_sample_table
+
+__all__ = ["nrmse", "free_run_nrmse", "free_run_scorer"]
+
+
+def nrmse(y_true, y_pred) -> float:
+    """Root-mean-square error normalised by the standard deviation of ``y_true``."""
+    y_true = np.asarray(y_true, dtype=float)
+    y_pred = np.asarray(y_pred, dtype=float)
+    sd = np.std(y_true)
+    if sd == 0:
+        return float(np.sqrt(np.mean((y_true - y_pred) ** 2)))
+    return float(np.sqrt(np.mean((y_true - y_pred) ** 2)) / sd)
+
+
+def _final_step(estimator):
+    return estimator[-1] if hasattr(estimator, "steps") else estimator
+
+
+def free_run_nrmse(estimator, X, y=None, discard=0) -> float:
+    """Mean free-run NRMSE over the datasets of the long sample table ``X``.
+
+    Each dataset is simulated from its input alone at its own speed, started
+    from its first measured outputs (model predicted output), and the first
+    ``discard`` samples are left out of the error. A diverging free run scores
+    ``inf``.
+    """
+    model = _final_step(estimator)
+    datasets, has_speed = read_sample_table(X, y)
+    errors = []
+    for d in datasets:
+        lag = max(model.ny_, model.nu_)
+        try:
+            yhat = model.simulate(d.u, d.speed if has_speed else 0.0, y0=d.y[:lag])
+        except FreeRunDivergenceError:
+            return float("inf")
+        errors.append(nrmse(d.y[discard:], yhat[discard:]))
+    return float(np.mean(errors))
+
+
+def free_run_scorer(estimator, X, y=None):
+    """scikit-learn scorer: minus the mean free-run NRMSE (greater is better).
+
+    Use as ``cross_validate(pipe, X, y, groups=X['speed'], cv=LeaveOneGroupOut(),
+    scoring=free_run_scorer)``; ``X`` is the long sample table (``speed``, ``u``, ``y``).
+    """
+    return -free_run_nrmse(estimator, X, y)

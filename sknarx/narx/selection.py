@@ -1,0 +1,226 @@
+"""CommonStructureEFOR: one term set common to all speeds (AERR-based EFOR)."""
+
+from __future__ import annotations
+
+import warnings
+from numbers import Integral, Real
+
+import numpy as np
+import pandas as pd
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
+
+from ._design import read_term_matrix
+from ._orthogonal import compress, condition_numbers, efor, matrix_blocks, unscale
+
+__all__ = ["CommonStructureEFOR", "IllConditionedWarning", "fit_efor"]
+
+#: Above this 2-norm condition number of the (column-normalised) selected
+#: regressors, coefficients lose more than about half of their digits with the
+#: Gram solver, which squares it.
+COND_WARN = 1e6
+
+
+class IllConditionedWarning(UserWarning):
+    """The selected regressors are nearly collinear (often: oversampled data)."""
+
+
+def fit_efor(Z, norms, esr, max_terms, tol, order=None):
+    """Run the kernel and derive the reported quantities (shared with the regressor)."""
+    res = efor(Z, norms, esr=esr, max_terms=max_terms, order=order, tol=tol)
+    if not res.selected:
+        raise ValueError(
+            "No term could be selected: every candidate is linearly dependent or zero in at "
+            "least one dataset. Check that the input excites the system (it must not be "
+            "constant or zero)."
+        )
+    coef = unscale(res.coef, norms, res.selected)
+    cond = condition_numbers(Z, res.selected)
+    return res, coef, cond
+
+
+def warn_conditioning(cond, speeds=None):
+    worst = int(np.argmax(cond))
+    if cond[worst] > COND_WARN:
+        where = f" at speed {speeds[worst]:g} rad/s" if speeds is not None else ""
+        warnings.warn(
+            f"The selected regressors are ill-conditioned (condition number "
+            f"{cond[worst]:.3g}{where}). Coefficients may be inaccurate; the data are "
+            "probably oversampled: lower the sampling rate (decimate), use fewer lags, or "
+            "use solver='qr'.",
+            IllConditionedWarning,
+            stacklevel=3,
+        )
+
+
+class CommonStructureEFOR(TransformerMixin, BaseEstimator):
+    """Select one NARX term set common to K datasets by AERR-based EFOR.
+
+    At each step every remaining candidate is orthogonalised, in every dataset,
+    against the terms already chosen; its error reduction ratio ``ERR_k`` is
+    computed per dataset and averaged into ``AERR = 100/K sum_k ERR_k``; the
+    candidate with the largest AERR is selected for all datasets. Selection stops
+    when the error-to-signal ratio ``ESR = 100 - sum AERR`` drops below ``esr``
+    or after ``max_terms`` terms. With one dataset this is the classical FROLS
+    algorithm of Billings et al.
+
+    Parameters
+    ----------
+    esr : float, default=0.01
+        Stop threshold on the error-to-signal ratio, in percent.
+    max_terms : int or None, default=None
+        Largest number of terms to select.
+    solver : {'gram', 'qr'}, default='gram'
+        How each dataset is compressed in one chunked pass: ``'gram'`` (fastest)
+        or ``'qr'`` (TSQR; about 4x slower, keeps accuracy on badly conditioned,
+        oversampled data).
+    tol : float, default=1e-12
+        Relative squared norm below which an orthogonalised candidate counts as
+        linearly dependent on the selected terms.
+
+    Attributes
+    ----------
+    selected_indices_ : ndarray of int
+        Column indices of the selected terms, in selection order.
+    selected_terms_ : list of str
+        Their names.
+    aerr_ : ndarray of shape (n_selected,)
+        AERR of each step, percent.
+    esr_ : float
+        Final error-to-signal ratio, percent.
+    err_ : DataFrame of shape (n_datasets, n_selected)
+        Per-dataset ERR (fraction) of each selected term; index = speed.
+    coef_ : DataFrame of shape (n_datasets, n_selected)
+        Per-dataset coefficients of the selected terms (inverse Gram-Schmidt).
+    speeds_ : ndarray or None
+        Speed of each dataset (rad/s), when the input carried speeds.
+    condition_number_ : float
+        Largest condition number of the normalised selected regressors.
+    stop_reason_ : str
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sknarx import NarxTermDictionary, CommonStructureEFOR
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal(400); y = np.zeros(400)
+    >>> for t in range(2, 400):
+    ...     y[t] = 0.5 * y[t - 1] + u[t - 1] + 0.1 * u[t - 2] ** 2
+    >>> P = NarxTermDictionary(ny=2, nu=2, degree=2).fit_transform(np.column_stack([u, y]))
+    >>> sel = CommonStructureEFOR(esr=1e-8, max_terms=3).fit(P, y)
+    >>> sorted(sel.selected_terms_)
+    ['u(t-1)', 'u(t-2)^2', 'y(t-1)']
+    """
+
+    _parameter_constraints = {
+        "esr": [Interval(Real, 0, 100, closed="both")],
+        "max_terms": [Interval(Integral, 1, None, closed="left"), None],
+        "solver": [StrOptions({"gram", "qr"})],
+        "tol": [Interval(Real, 0, 1, closed="left")],
+    }
+
+    def __init__(self, esr=0.01, max_terms=None, solver="gram", tol=1e-12):
+        self.esr = esr
+        self.max_terms = max_terms
+        self.solver = solver
+        self.tol = tol
+
+    def fit(self, X, y):
+        """Select the common terms.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_candidates)
+            Candidate terms, e.g. from :class:`NarxTermDictionary`; an index named
+            ``speed`` splits the rows into datasets (runs of equal speed).
+        y : array-like of shape (n_samples,)
+            Output.
+
+        Returns
+        -------
+        self : CommonStructureEFOR
+        """
+        self._validate_params()
+        tm = read_term_matrix(X, y, "CommonStructureEFOR")
+        self.n_features_in_ = tm.P.shape[1]
+        if isinstance(X, pd.DataFrame):
+            self.feature_names_in_ = np.asarray(X.columns, dtype=object)
+        Z, norms = compress_groups(tm, self.solver)
+        res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol)
+        speeds = tm.dataset_speeds()
+        warn_conditioning(cond, speeds)
+        names = [tm.names[j] for j in res.selected]
+        index = pd.Index(speeds, name="speed") if speeds is not None else None
+        self.selected_indices_ = np.asarray(res.selected, dtype=int)
+        self.selected_terms_ = names
+        self.aerr_ = res.aerr
+        self.esr_ = float(res.esr)
+        self.err_ = pd.DataFrame(res.err, columns=names, index=index)
+        self.coef_ = pd.DataFrame(coef, columns=names, index=index)
+        self.speeds_ = speeds
+        self.condition_number_ = float(np.max(cond))
+        self.stop_reason_ = res.stop_reason
+        return self
+
+    def transform(self, X):
+        """Keep the selected columns, in selection order (the index is kept).
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_candidates)
+
+        Returns
+        -------
+        X_selected : DataFrame or ndarray of shape (n_samples, n_selected)
+        """
+        check_is_fitted(self, "selected_indices_")
+        if isinstance(X, pd.DataFrame):
+            if X.shape[1] != self.n_features_in_:
+                raise ValueError(
+                    f"X has {X.shape[1]} features, but CommonStructureEFOR is expecting "
+                    f"{self.n_features_in_} features as input."
+                )
+            return X.iloc[:, self.selected_indices_]
+        X = np.asarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
+            raise ValueError(
+                f"X has shape {X.shape}, but CommonStructureEFOR is expecting "
+                f"{self.n_features_in_} features as input."
+            )
+        return X[:, self.selected_indices_]
+
+    def get_support(self, indices=False):
+        """Mask (or indices, in selection order) of the selected candidates."""
+        check_is_fitted(self, "selected_indices_")
+        if indices:
+            return self.selected_indices_.copy()
+        mask = np.zeros(self.n_features_in_, dtype=bool)
+        mask[self.selected_indices_] = True
+        return mask
+
+    def get_feature_names_out(self, input_features=None):
+        """Names of the selected terms in selection order."""
+        check_is_fitted(self, "selected_indices_")
+        return np.asarray(self.selected_terms_, dtype=object)
+
+
+def compress_groups(tm, solver):
+    """Stacked normalised factors of every dataset of a term matrix."""
+    Zs, norms = [], []
+    width = tm.P.shape[1] + 1
+    for k, (a, b) in enumerate(tm.groups):
+        ok = tm.valid_rows(a, b)
+        P, yk = tm.P[a:b][ok], tm.y[a:b][ok]
+        if P.shape[0] < 2:
+            raise ValueError(
+                f"Dataset {k} has {P.shape[0]} usable sample(s); at least 2 are needed."
+            )
+        if not np.any(yk):
+            raise ValueError(
+                f"The output of dataset {k} is identically zero; nothing can be identified."
+            )
+        Z, nrm = compress(matrix_blocks(P, yk), width, solver)
+        Zs.append(Z)
+        norms.append(nrm)
+    return np.stack(Zs), np.stack(norms)

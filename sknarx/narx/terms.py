@@ -1,0 +1,171 @@
+"""Polynomial NARX candidate terms: enumeration, names, parsing and evaluation.
+
+A term is a monomial in the lagged variables ``y(t-1) .. y(t-ny), u(t-1) .. u(t-nu)``.
+It is stored as a row of an integer *exponent matrix* whose columns are those
+variables in that order (y lags ascending, then u lags ascending). The printed
+name is a faithful, parseable encoding of the row, so a term list can travel
+between pipeline stages, JSON files and reports as plain strings.
+"""
+
+from __future__ import annotations
+
+import re
+from itertools import combinations_with_replacement
+from math import comb
+
+import numpy as np
+
+__all__ = [
+    "n_candidate_terms",
+    "monomial_exponents",
+    "term_names",
+    "parse_terms",
+    "TermSet",
+]
+
+_FACTOR = re.compile(r"^([yu])\(t-(\d+)\)(?:\^(\d+))?$")
+
+
+def n_candidate_terms(ny: int, nu: int, degree: int) -> int:
+    """Number of monomials of degree <= ``degree`` in ``ny + nu`` variables.
+
+    This is the paper's ``M = (n + L)! / (n! L!)`` with ``n = ny + nu``.
+    """
+    return comb(ny + nu + degree, degree)
+
+
+def monomial_exponents(ny: int, nu: int, degree: int) -> np.ndarray:
+    """Exponent matrix of every candidate term, shape ``(M, ny + nu)``.
+
+    Rows are ordered by total degree, then lexicographically by the variable
+    order ``y(t-1..ny), u(t-1..nu)``; row 0 is the constant term.
+    """
+    n = ny + nu
+    rows = [np.zeros(n, dtype=np.int64)]
+    for d in range(1, degree + 1):
+        for combo in combinations_with_replacement(range(n), d):
+            e = np.zeros(n, dtype=np.int64)
+            for j in combo:
+                e[j] += 1
+            rows.append(e)
+    return np.vstack(rows) if rows else np.zeros((0, n), dtype=np.int64)
+
+
+def _variable_names(ny: int, nu: int) -> list[str]:
+    return [f"y(t-{i})" for i in range(1, ny + 1)] + [f"u(t-{i})" for i in range(1, nu + 1)]
+
+
+def term_names(exponents: np.ndarray, ny: int, nu: int) -> list[str]:
+    """Printed names, e.g. ``1``, ``y(t-1)``, ``u(t-2)^2``, ``y(t-1)*u(t-3)``."""
+    var = _variable_names(ny, nu)
+    names = []
+    for row in np.asarray(exponents):
+        factors = [var[j] + (f"^{int(p)}" if p > 1 else "") for j, p in enumerate(row) if p > 0]
+        names.append("*".join(factors) if factors else "1")
+    return names
+
+
+def parse_terms(names) -> tuple[np.ndarray, int, int]:
+    """Inverse of :func:`term_names`: names to ``(exponents, ny, nu)``.
+
+    ``ny`` and ``nu`` are the largest lags that occur (0 when a variable is
+    absent), so the exponent matrix is as narrow as the terms allow.
+    """
+    parsed = []
+    ny = nu = 0
+    for name in names:
+        name = str(name).strip()
+        factors = {}
+        if name != "1":
+            for factor in name.split("*"):
+                m = _FACTOR.match(factor.strip())
+                if m is None:
+                    raise ValueError(
+                        f"Cannot parse NARX term {name!r}: expected factors like 'y(t-1)', "
+                        "'u(t-2)^2' joined by '*', or '1' for the constant."
+                    )
+                var, lag, power = m.group(1), int(m.group(2)), int(m.group(3) or 1)
+                if lag < 1 or power < 1:
+                    raise ValueError(f"Lag and power must be >= 1 in term {name!r}.")
+                factors[(var, lag)] = factors.get((var, lag), 0) + power
+                if var == "y":
+                    ny = max(ny, lag)
+                else:
+                    nu = max(nu, lag)
+        parsed.append(factors)
+    exps = np.zeros((len(parsed), ny + nu), dtype=np.int64)
+    for i, factors in enumerate(parsed):
+        for (var, lag), power in factors.items():
+            exps[i, lag - 1 if var == "y" else ny + lag - 1] = power
+    return exps, ny, nu
+
+
+class TermSet:
+    """Evaluates a set of monomials on lagged series.
+
+    Each monomial of degree ``d`` is computed as a monomial of degree ``d - 1``
+    (its *parent*, always present in the evaluation plan) times one lagged
+    variable, so a full dictionary costs one multiplication per column.
+
+    Parameters
+    ----------
+    exponents : ndarray of shape (n_terms, ny + nu)
+    ny, nu : int
+        Output and input lags that the exponent columns refer to.
+    """
+
+    def __init__(self, exponents, ny: int, nu: int):
+        self.exponents = np.asarray(exponents, dtype=np.int64)
+        self.ny, self.nu = int(ny), int(nu)
+        if self.exponents.ndim != 2 or self.exponents.shape[1] != self.ny + self.nu:
+            raise ValueError("exponents must have ny + nu columns")
+        self.max_lag = max(self.ny, self.nu, 0)
+        self._plan = self._make_plan()
+
+    def _make_plan(self):
+        # Evaluation plan over the closure of the terms under "drop one factor":
+        # each entry is (parent index, variable index) with parent -1 for the constant.
+        index = {(): -1}
+        plan: list[tuple[int, int]] = []
+
+        def ensure(key):
+            if key in index:
+                return index[key]
+            var = key[-1]
+            parent = ensure(key[:-1])
+            plan.append((parent, var))
+            index[key] = len(plan) - 1
+            return index[key]
+
+        out = []
+        for row in self.exponents:
+            key = tuple(j for j, p in enumerate(row) for _ in range(int(p)))
+            out.append(ensure(key))
+        return np.array(plan, dtype=np.int64).reshape(-1, 2), np.array(out, dtype=np.int64)
+
+    def lagged(self, u, y, start: int, stop: int) -> np.ndarray:
+        """Lagged variables for samples ``start <= t < stop``; needs ``start >= max_lag``."""
+        cols = [y[start - i : stop - i] for i in range(1, self.ny + 1)]
+        cols += [u[start - i : stop - i] for i in range(1, self.nu + 1)]
+        if not cols:
+            return np.empty((stop - start, 0))
+        return np.column_stack(cols)
+
+    def evaluate(self, u, y, start: int, stop: int) -> np.ndarray:
+        """Regressor matrix of shape ``(stop - start, n_terms)`` for samples ``start..stop-1``."""
+        lag = self.lagged(u, y, start, stop)
+        plan, out = self._plan
+        n = stop - start
+        cache = np.empty((n, len(plan)))
+        for i, (parent, var) in enumerate(plan):
+            if parent < 0:
+                cache[:, i] = lag[:, var]
+            else:
+                np.multiply(cache[:, parent], lag[:, var], out=cache[:, i])
+        result = np.empty((n, len(out)))
+        for j, src in enumerate(out):
+            if src < 0:
+                result[:, j] = 1.0
+            else:
+                result[:, j] = cache[:, src]
+        return result
