@@ -60,6 +60,9 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         Compression of each dataset; see :class:`CommonStructureEFOR`.
     tol : float, default=1e-12
         Relative linear-dependence tolerance of the orthogonalisation.
+    prune : bool, default=True
+        Backward elimination of terms not needed to meet ``esr`` after the
+        forward pass; ``False`` is the paper's method exactly.
 
     Attributes
     ----------
@@ -120,6 +123,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         "coef_degree": [Interval(Integral, 0, None, closed="left")],
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
+        "prune": ["boolean"],
     }
 
     def __init__(
@@ -132,6 +136,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         coef_degree=3,
         solver="gram",
         tol=1e-12,
+        prune=True,
     ):
         self.ny = ny
         self.nu = nu
@@ -141,6 +146,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.coef_degree = coef_degree
         self.solver = solver
         self.tol = tol
+        self.prune = prune
 
     # ------------------------------------------------------------------ fit
     def fit(self, X, y=None):
@@ -212,7 +218,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             scale = max(scale, float(np.max(np.abs(yk))))
         self.output_scale_ = scale
         res, coef, cond = fit_efor(np.stack(Zs), np.stack(norms), self.esr,
-                                   self.max_terms, self.tol)
+                                   self.max_terms, self.tol, prune=self.prune)
         return res, coef, cond, [names_all[j] for j in res.selected], ws
 
     def _fit_terms(self, X, y):
