@@ -7,7 +7,12 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from narx_systems import scaled_coef_fn, simulate_system
 
-from sknarx import CommonStructureEFOR, IllConditionedWarning, NarxTermDictionary, SpeedScheduledNarx
+from sknarx import (
+    CommonStructureEFOR,
+    IllConditionedWarning,
+    NarxTermDictionary,
+    SpeedScheduledNarx,
+)
 from sknarx.narx.terms import TermSet, parse_terms
 
 SPEEDS = np.array([80.0, 120.0, 160.0, 200.0, 240.0, 280.0])

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from sklearn.utils.validation import validate_data
 
 from .sweep_data import runs
 
@@ -27,35 +28,25 @@ class TermMatrix:
         return ~np.all(np.isnan(self.P[a:b]), axis=1)
 
 
-def read_term_matrix(X, y, who: str) -> TermMatrix:
-    """Term matrix ``X`` (DataFrame with an optional ``speed`` index, or array) and target."""
-    if isinstance(X, pd.DataFrame):
-        names = [str(c) for c in X.columns]
-        speeds = (
-            X.index.to_numpy(dtype=float) if X.index.name == "speed" else None
-        )
-        P = X.to_numpy(dtype=float)
-    else:
-        P = np.asarray(X, dtype=float)
-        if P.ndim == 1:
-            raise ValueError(
-                f"{who} expects a 2-D term matrix; got a 1-D array. Reshape with "
-                "X.reshape(-1, 1) for a single term."
-            )
-        if P.ndim != 2:
-            raise ValueError(f"{who} expects a 2-D term matrix; got {P.ndim} dimensions.")
-        names = [f"x{j}" for j in range(P.shape[1])]
-        speeds = None
-    if P.shape[0] < 1 or P.shape[1] < 1:
-        raise ValueError(f"{who}: found array with shape {P.shape}; at least 1 sample and "
-                         "1 feature are required.")
+def read_term_matrix(estimator, X, y, who: str, reset: bool = True) -> TermMatrix:
+    """Term matrix ``X`` (DataFrame with an optional ``speed`` index, or array) and target.
+
+    Validation goes through scikit-learn's ``validate_data`` (shapes, dtypes,
+    sparse and complex input, feature names); whole NaN rows are allowed because
+    they mark samples without lag history.
+    """
+    speeds = None
+    if isinstance(X, pd.DataFrame) and X.index.name == "speed":
+        speeds = X.index.to_numpy(dtype=float)
+    names = [str(c) for c in X.columns] if isinstance(X, pd.DataFrame) else None
     if y is None:
-        raise ValueError(f"{who} requires the target output y.")
-    y = np.asarray(y, dtype=float).reshape(-1) if np.ndim(y) <= 1 else np.asarray(y, float)
-    if y.ndim != 1:
-        raise ValueError(f"{who}: y must be 1-D (one output), got shape {np.shape(y)}.")
-    if y.shape[0] != P.shape[0]:
-        raise ValueError(f"{who}: X has {P.shape[0]} rows but y has {y.shape[0]}.")
+        raise ValueError(
+            f"{who} requires y to be passed, but the target y is None: give the output."
+        )
+    P, y = validate_data(estimator, X, y, reset=reset, ensure_all_finite="allow-nan",
+                         y_numeric=True, dtype=np.float64)
+    if names is None:
+        names = [f"x{j}" for j in range(P.shape[1])]
     nan_rows = np.all(np.isnan(P), axis=1)
     bad = ~np.isfinite(P) & ~nan_rows[:, None]
     if bad.any():
@@ -70,3 +61,14 @@ def read_term_matrix(X, y, who: str) -> TermMatrix:
         raise ValueError(f"{who}: the speed index contains NaN/inf.")
     groups = runs(speeds) if speeds is not None else [(0, P.shape[0])]
     return TermMatrix(P=P, y=y, names=names, speeds=speeds, groups=groups)
+
+
+def check_nan_rows(P: np.ndarray) -> np.ndarray:
+    """Reject NaN/inf except whole NaN rows (samples without history)."""
+    nan_rows = np.all(np.isnan(P), axis=1)
+    if (~np.isfinite(P) & ~nan_rows[:, None]).any():
+        raise ValueError(
+            "Input X contains NaN or infinity outside whole rows; only samples without lag "
+            "history may be all-NaN. Clean the input data."
+        )
+    return P

@@ -123,9 +123,10 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
                     f"X has {np.asarray(X).shape[1]} features, but NarxTermDictionary is "
                     f"expecting {self.n_features_in_} features as input."
                 )
-        min_len = max(self.ny, self.nu) + 1
+        # Any length is accepted: samples without a complete history become NaN rows and
+        # the selector/regressor say so if too few rows remain.
         for k, d in enumerate(datasets):
-            check_series(d.u, d.y, d.speed, min_len, f"Dataset {k} (speed {d.speed:g} rad/s)")
+            check_series(d.u, d.y, d.speed, 1, f"Dataset {k} (speed {d.speed:g} rad/s)")
         return datasets, has_speed
 
     def transform(self, X, y=None):
@@ -148,7 +149,8 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         lag = self.max_lag_
         for d in datasets:
             P = np.full((len(d.y), self.n_terms_), np.nan)
-            P[lag:] = self.termset_.evaluate(d.u, d.y, lag, len(d.y))
+            if len(d.y) > lag:
+                P[lag:] = self.termset_.evaluate(d.u, d.y, lag, len(d.y))
             blocks.append(P)
             speeds.append(np.full(len(d.y), d.speed))
         P = np.vstack(blocks)
@@ -172,4 +174,6 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.allow_nan = False
+        # The output is always a float64 DataFrame of monomials.
+        tags.transformer_tags.preserves_dtype = []
         return tags

@@ -10,9 +10,9 @@ import pandas as pd
 from numpy.polynomial import Polynomial
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._design import read_term_matrix
+from ._design import check_nan_rows, read_term_matrix
 from ._orthogonal import compress, termset_blocks
 from .freerun import FreeRunDivergenceError, free_run
 from .selection import compress_groups, fit_efor, warn_conditioning
@@ -222,10 +222,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         return res, coef, cond, [names_all[j] for j in res.selected], ws
 
     def _fit_terms(self, X, y):
-        tm = read_term_matrix(X, y, "SpeedScheduledNarx")
-        self.n_features_in_ = tm.P.shape[1]
-        if isinstance(X, pd.DataFrame):
-            self.feature_names_in_ = np.asarray(X.columns, dtype=object)
+        tm = read_term_matrix(self, X, y, "SpeedScheduledNarx")
         speeds = tm.dataset_speeds()
         if speeds is not None:
             self._check_speeds(speeds)
@@ -269,6 +266,11 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         a, b = float(np.min(speeds)), float(np.max(speeds))
         self.speed_range_ = (a, b)
         J = self.coef_degree
+        if a == b:  # a single speed (then coef_degree is 0): constant coefficients
+            self.coef_poly_ = coef[:1].T.copy()
+            self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names,
+                                                   columns=["beta0"])
+            return
         polys = [Polynomial.fit(speeds, coef[:, m], J, domain=[a, b]) for m in range(coef.shape[1])]
         self.coef_poly_ = np.array([np.pad(p.coef, (0, J + 1 - p.coef.size)) for p in polys])
         raw = np.array([np.pad(p.convert().coef, (0, J + 1 - p.convert().coef.size))
@@ -391,21 +393,16 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 y0 = d.y[:lag] if np.all(np.isfinite(d.y[:lag])) else None
                 out.append(self.simulate(d.u, d.speed if has_speed else 0.0, y0=y0))
             return np.concatenate(out)
-        if isinstance(X, pd.DataFrame):
-            if self.n_features_in_ != X.shape[1]:
-                raise ValueError(f"X has {X.shape[1]} features, expected {self.n_features_in_}.")
-            P = X.to_numpy(dtype=float)
-            speeds = X.index.to_numpy(dtype=float) if X.index.name == "speed" else None
-        else:
-            P = np.asarray(X, dtype=float)
-            if P.ndim != 2:
-                raise ValueError(f"Expected a 2-D term matrix, got shape {P.shape}.")
-            if P.shape[1] != getattr(self, "n_features_in_", P.shape[1]):
-                raise ValueError(
-                    f"X has {P.shape[1]} features, but SpeedScheduledNarx is expecting "
-                    f"{self.n_features_in_} features as input."
-                )
-            speeds = None
+        if not hasattr(self, "n_features_in_"):
+            raise ValueError(
+                "This model was fitted with fit(datasets, speeds); predict needs a long "
+                "sample table (a DataFrame with columns 'speed', 'u'[, 'y']) or use simulate()."
+            )
+        speeds = None
+        if isinstance(X, pd.DataFrame) and X.index.name == "speed":
+            speeds = X.index.to_numpy(dtype=float)
+        P = check_nan_rows(validate_data(self, X, reset=False, ensure_all_finite="allow-nan",
+                                         dtype=np.float64))
         if speeds is None or self.speed_range_ is None:
             theta = self.coef_poly_[:, 0] if self.speed_range_ is None else None
             if theta is None:

@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._design import read_term_matrix
+from ._design import check_nan_rows, read_term_matrix
 from ._orthogonal import compress, condition_numbers, efor, matrix_blocks, unscale
 
 __all__ = ["CommonStructureEFOR", "IllConditionedWarning", "fit_efor"]
@@ -184,10 +184,7 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         self : CommonStructureEFOR
         """
         self._validate_params()
-        tm = read_term_matrix(X, y, "CommonStructureEFOR")
-        self.n_features_in_ = tm.P.shape[1]
-        if isinstance(X, pd.DataFrame):
-            self.feature_names_in_ = np.asarray(X.columns, dtype=object)
+        tm = read_term_matrix(self, X, y, "CommonStructureEFOR")
         Z, norms = compress_groups(tm, self.solver)
         res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol, prune=self.prune)
         speeds = tm.dataset_speeds()
@@ -217,20 +214,11 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         X_selected : DataFrame or ndarray of shape (n_samples, n_selected)
         """
         check_is_fitted(self, "selected_indices_")
+        arr = check_nan_rows(validate_data(self, X, reset=False, ensure_all_finite="allow-nan",
+                                           dtype=np.float64))
         if isinstance(X, pd.DataFrame):
-            if X.shape[1] != self.n_features_in_:
-                raise ValueError(
-                    f"X has {X.shape[1]} features, but CommonStructureEFOR is expecting "
-                    f"{self.n_features_in_} features as input."
-                )
             return X.iloc[:, self.selected_indices_]
-        X = np.asarray(X, dtype=float)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"X has shape {X.shape}, but CommonStructureEFOR is expecting "
-                f"{self.n_features_in_} features as input."
-            )
-        return X[:, self.selected_indices_]
+        return arr[:, self.selected_indices_]
 
     def get_support(self, indices=False):
         """Mask (or indices, in selection order) of the selected candidates."""
@@ -256,7 +244,8 @@ def compress_groups(tm, solver):
         P, yk = tm.P[a:b][ok], tm.y[a:b][ok]
         if P.shape[0] < 2:
             raise ValueError(
-                f"Dataset {k} has {P.shape[0]} usable sample(s); at least 2 are needed."
+                f"Dataset {k} has n_samples = {P.shape[0]} usable sample(s) (rows with a "
+                "complete lag history); at least 2 are needed."
             )
         if not np.any(yk):
             raise ValueError(

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from sklearn.utils import check_array
 
 __all__ = ["Dataset", "as_datasets", "split_long_table", "check_series"]
 
@@ -145,11 +146,12 @@ def read_sample_table(X, y=None, require_y: bool = True) -> tuple[list[Dataset],
                 f"got columns {list(X.columns)}."
             )
         return split_long_table(df, require_y=require_y), has_speed
-    arr = np.asarray(X, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+    arr = check_array(X, dtype=np.float64, ensure_all_finite=False)
+    if arr.shape[1] not in (2, 3):
         raise ValueError(
             "X must be a long table: a DataFrame with columns 'speed', 'u', 'y', or a 2-D "
-            f"array with columns (speed, u, y) or (u, y); got shape {arr.shape}."
+            f"array with columns (speed, u, y) or (u, y); got {arr.shape[1]} feature(s) "
+            f"(n_features = {arr.shape[1]})."
         )
     if arr.shape[1] == 3:
         cols = {"speed": arr[:, 0], "u": arr[:, 1], "y": arr[:, 2]}
