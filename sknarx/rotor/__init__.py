@@ -1,0 +1,33 @@
+"""The physics simulator: parameters, model matrices, bearings, integrator, effects."""
+
+from .effects import (
+    ClearanceChange,
+    Effect,
+    MeasurementNoise,
+    ProbeRunout,
+    Rub,
+    SpeedFluctuation,
+)
+from .linear import LinearRotorModel
+from .matrices import RotorMatrices, assemble
+from .parameters import DOF_NAMES, RotorParameters
+from .simulator import RotorBearingSimulator, SimulationDivergenceError
+from .sweep_table import load_sweep, save_sweep
+
+__all__ = [
+    "RotorBearingSimulator",
+    "SimulationDivergenceError",
+    "RotorParameters",
+    "DOF_NAMES",
+    "RotorMatrices",
+    "assemble",
+    "LinearRotorModel",
+    "Effect",
+    "Rub",
+    "ProbeRunout",
+    "MeasurementNoise",
+    "SpeedFluctuation",
+    "ClearanceChange",
+    "load_sweep",
+    "save_sweep",
+]

@@ -1,0 +1,152 @@
+"""Fixed-step fourth-order Runge-Kutta integrator, compiled with numba.
+
+The right-hand side is the rotor's linear part ``M^-1 (F - (C + Omega G) v - K q)``
+plus three nonlinear/forcing contributions: unbalance (with the angular
+acceleration term of a speed profile), gravity and the two ball bearings. Any
+further physics enters through ONE hook, ``extra_force(t, phi, omega, alpha, q, v,
+params, out)``, a numba-compiled function that adds generalised forces to
+``out``; effects (rub, crack, misalignment, looseness...) are composed into such a
+function outside this module (see :mod:`sknarx.rotor.effects`), so the
+integrator never changes when physics is added.
+
+Within one output sample the speed varies linearly (exact for piecewise-linear
+speed profiles), and the shaft angle is integrated analytically.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .bearings import bearing_force
+
+__all__ = ["integrate", "no_extra_force"]
+
+
+@njit(cache=True, nogil=True)
+def no_extra_force(t, phi, omega, alpha, q, v, params, out):  # pragma: no cover
+    return
+
+
+@njit(nogil=True, inline="always")
+def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
+           f, acc):  # pragma: no cover
+    n = q.shape[0]
+    for i in range(n):
+        f[i] = fg[i]
+    # unbalance of the two disks: m e (w^2 cos + alpha sin, w^2 sin - alpha cos)
+    for d in range(2):
+        me, ph, ix, iy = unb[d, 0], unb[d, 1], int(unb[d, 2]), int(unb[d, 3])
+        c, s = math.cos(phi + ph), math.sin(phi + ph)
+        f[ix] += me * (w * w * c + al * s)
+        f[iy] += me * (w * w * s - al * c)
+    kB, gamma, expo, nb, cr = brg[0], brg[1], brg[2], int(brg[3]), brg[4]
+    for b in range(2):
+        ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
+        fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, expo, nb, cr)
+        f[ix] += fx
+        f[iy] += fy
+    extra(t, phi, w, al, q, v, eparams, f)
+    for i in range(n):
+        acc_i = f[i]
+        for j in range(n):
+            acc_i -= (C[i, j] + w * G[i, j]) * v[j] + K[i, j] * q[j]
+        acc[i] = acc_i * minv[i]
+
+
+@njit(nogil=True)
+def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb,
+              brg, extra, eparams, limit):  # pragma: no cover
+    """Integrate over ``len(omega) - 1`` sample intervals.
+
+    Parameters
+    ----------
+    omega : (n + 1,) speed at each sample instant, rad/s (linear in between).
+    record_from : first sample index that is recorded.
+    limit : a generalised coordinate beyond this magnitude counts as divergence.
+
+    Returns
+    -------
+    Q : (n + 1 - record_from, ndof) recorded displacements.
+    U : (n + 1 - record_from,) the paper's input, disk O1's x unbalance force, N.
+    PHI : (n + 1 - record_from,) shaft angle, rad.
+    status : -1, or the sample index at which the solution diverged.
+    """
+    n = omega.shape[0] - 1
+    ndof = q0.shape[0]
+    nrec = n + 1 - record_from
+    Q = np.empty((nrec, ndof))
+    U = np.empty(nrec)
+    PHI = np.empty(nrec)
+    q = q0.copy()
+    v = v0.copy()
+    f = np.empty(ndof)
+    k1q = np.empty(ndof)
+    k1v = np.empty(ndof)
+    k2q = np.empty(ndof)
+    k2v = np.empty(ndof)
+    k3q = np.empty(ndof)
+    k3v = np.empty(ndof)
+    k4q = np.empty(ndof)
+    k4v = np.empty(ndof)
+    qt = np.empty(ndof)
+    vt = np.empty(ndof)
+    h = dt / substeps
+    phi = phi0
+    me1, ph1 = unb[0, 0], unb[0, 1]
+    for k in range(n + 1):
+        wk = omega[k]
+        al = (omega[k + 1] - wk) / dt if k < n else 0.0
+        if k >= record_from:
+            r = k - record_from
+            for i in range(ndof):
+                Q[r, i] = q[i]
+            c, s = math.cos(phi + ph1), math.sin(phi + ph1)
+            U[r] = me1 * (wk * wk * c + al * s)
+            PHI[r] = phi
+        bad = False
+        for i in range(ndof):
+            if not (abs(q[i]) <= limit):
+                bad = True
+        if bad:
+            return Q, U, PHI, k
+        if k == n:
+            break
+        tk = t0 + k * dt
+        for sub in range(substeps):
+            tau = sub * h
+            ta = tk + tau
+            wa = wk + al * tau
+            pa = phi + wk * tau + 0.5 * al * tau * tau
+            wm = wa + 0.5 * al * h
+            pm = pa + wa * 0.5 * h + 0.125 * al * h * h
+            we = wa + al * h
+            pe = pa + wa * h + 0.5 * al * h * h
+            for i in range(ndof):
+                k1q[i] = v[i]
+            _accel(ta, pa, wa, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams, f, k1v)
+            for i in range(ndof):
+                qt[i] = q[i] + 0.5 * h * k1q[i]
+                vt[i] = v[i] + 0.5 * h * k1v[i]
+                k2q[i] = vt[i]
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, C, G, K, fg, unb, brg, extra,
+                   eparams, f, k2v)
+            for i in range(ndof):
+                qt[i] = q[i] + 0.5 * h * k2q[i]
+                vt[i] = v[i] + 0.5 * h * k2v[i]
+                k3q[i] = vt[i]
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, C, G, K, fg, unb, brg, extra,
+                   eparams, f, k3v)
+            for i in range(ndof):
+                qt[i] = q[i] + h * k3q[i]
+                vt[i] = v[i] + h * k3v[i]
+                k4q[i] = vt[i]
+            _accel(ta + h, pe, we, al, qt, vt, minv, C, G, K, fg, unb, brg, extra, eparams,
+                   f, k4v)
+            for i in range(ndof):
+                q[i] += h / 6.0 * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
+                v[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i])
+        phi += 0.5 * (wk + omega[k + 1]) * dt
+    return Q, U, PHI, -1

@@ -1,0 +1,212 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+import sknarx.rotor as R
+from sknarx.orders import order_components
+from sknarx.rotor.matrices import assemble
+from sknarx.rotor.reference import solve_reference
+
+PAPER_PEAK = 144.5  # rad/s, paper Fig. 2
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return R.RotorBearingSimulator()
+
+
+@pytest.fixture(scope="module")
+def coarse_sweep(sim):
+    speeds = np.arange(50.0, 320.0 + 1e-9, 2.0)
+    return sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=1.0, n_jobs=2, progress=False)
+
+
+def test_parameters_defaults_and_validation():
+    p = R.RotorParameters()
+    assert p.kB == 13.34e9 and p.n_balls == 8 and p.span == pytest.approx(0.9)
+    assert p.ball_pass_ratio == pytest.approx(3.08, abs=0.01)  # paper's BN
+    with pytest.raises(ValueError, match="m_O1"):
+        R.RotorParameters(m_O1=-1.0)
+    with pytest.raises(ValueError, match="k1"):
+        R.RotorParameters(k1=float("nan"))
+    with pytest.raises(ValueError, match="swap J_polar"):
+        R.RotorParameters(J_polar1=0.5)
+    with pytest.raises(ValueError, match="span"):
+        R.RotorParameters(b2=0.7)
+    assert R.RotorParameters.from_dict(p.to_dict()) == p
+
+
+def test_matrices_structure_and_rigid_body_invariance():
+    m = assemble(R.RotorParameters())
+    np.testing.assert_allclose(m.K, m.K.T)
+    np.testing.assert_allclose(m.C, m.C.T)
+    np.testing.assert_allclose(m.G, -m.G.T)
+    lam = np.linalg.eigvalsh(m.K)
+    assert lam.min() > -1e-6 * lam.max()
+    # free rotor (no bearings): 2 translations + 2 rigid rotations store no energy
+    assert np.sum(lam < 1e-9 * lam.max()) == 4
+    rigid = np.zeros(12)
+    for name, z in (("xA", 0.0), ("xO1", 0.29), ("xO2", 0.31), ("xB", 0.9)):
+        rigid[R.DOF_NAMES.index(name)] = 1e-3 + 2e-3 * z  # translation + rotation
+    rigid[R.DOF_NAMES.index("tyO1")] = rigid[R.DOF_NAMES.index("tyO2")] = 2e-3
+    np.testing.assert_allclose(m.K @ rigid, 0.0, atol=1e-9 * np.abs(m.K).max() * 1e-3)
+
+
+def test_gyroscopic_stiffening_of_forward_modes(sim):
+    lin = sim.linear_model()
+    camp = lin.campbell([0.0, 300.0, 600.0], n_modes=6)
+    fwd = camp[(camp.whirl == "forward") & (camp.frequency > 500)].groupby("speed").frequency.min()
+    assert fwd.loc[600.0] > fwd.loc[300.0]
+    crit = lin.critical_speeds(1000.0)
+    assert 100 < crit[0] < 160
+
+
+def test_peak_of_disk_amplitude_matches_paper(coarse_sweep):
+    amp = coarse_sweep.groupby("speed")["xO1"].agg(lambda x: (x.max() - x.min()) / 2)
+    peak = amp.idxmax()
+    assert abs(peak - PAPER_PEAK) / PAPER_PEAK < 0.03, peak
+
+
+def test_second_harmonic_from_gravity_preloaded_bearings(sim):
+    run = sim.simulate(250.0, fs=1000.0, n_samples=4096, settle=1.0)
+    amp = {d: order_components(run[d], run["phi"], (1, 2))[0] for d in ("xO1", "xA")}
+    # 2x is present at the disk and strongest (relative to 1x) at the bearing journal
+    assert amp["xO1"][1] > 1e-4 * amp["xO1"][0]
+    assert amp["xA"][1] / amp["xA"][0] > amp["xO1"][1] / amp["xO1"][0]
+    no_g = R.RotorBearingSimulator(R.RotorParameters(gravity=0.0)).simulate(
+        250.0, fs=1000.0, n_samples=4096, settle=1.0)
+    a0 = order_components(no_g["xO1"], no_g["phi"], (1, 2))[0]
+    assert a0[1] < 0.05 * amp["xO1"][1]
+
+
+def test_integrator_accuracy_against_tight_reference(sim):
+    fs, w = 1000.0, 250.0
+    ref, _ = solve_reference(sim, w, 0.6, fs, rtol=1e-10)
+    run = sim.simulate(w, fs=fs, n_samples=ref.shape[0], settle=0.0)
+    window = slice(300, None)
+    phi = run["phi"].to_numpy()[window]
+    for dof in ("xO1", "yO1", "xA"):
+        i = R.DOF_NAMES.index(dof)
+        a_ref = order_components(ref[window, i], phi, (1, 2))[0]
+        a = order_components(run[dof].to_numpy()[window], phi, (1, 2))[0]
+        np.testing.assert_allclose(a, a_ref, rtol=1e-4)
+
+
+def test_identical_for_any_n_jobs_and_repeated_runs(sim):
+    speeds = [90.0, 150.0, 210.0]
+    a = sim.sweep(speeds, fs=500.0, n_samples=300, settle=0.5, n_jobs=1, progress=False)
+    b = sim.sweep(speeds, fs=500.0, n_samples=300, settle=0.5, n_jobs=2, progress=False)
+    c = sim.sweep(speeds, fs=500.0, n_samples=300, settle=0.5, n_jobs=2, progress=False)
+    pd.testing.assert_frame_equal(a, b)
+    pd.testing.assert_frame_equal(b, c)
+
+
+def test_sweep_table_layout(coarse_sweep):
+    cols = list(coarse_sweep.columns)
+    assert cols[:4] == ["speed", "t", "u", "phi"] and cols[4:] == list(R.DOF_NAMES)
+    first = coarse_sweep[coarse_sweep.speed == 100.0]
+    assert first.t.iloc[0] == 0.0 and first.phi.iloc[0] == pytest.approx(0.0, abs=1e-9)
+    p = R.RotorParameters()
+    np.testing.assert_allclose(first.u, p.m_O1 * p.e * 100.0**2 * np.cos(100.0 * first.t),
+                               rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
+def test_bad_speeds_rejected(sim, bad):
+    with pytest.raises(ValueError, match="finite and non-negative"):
+        sim.sweep([100.0, bad], fs=500.0, n_samples=10, settle=0.0, progress=False)
+
+
+def test_bad_grid_rejected(sim):
+    with pytest.raises(ValueError, match="fs"):
+        sim.simulate(100.0, fs=0.0)
+    with pytest.raises(ValueError, match="n_samples"):
+        sim.simulate(100.0, n_samples=0)
+    with pytest.raises(ValueError, match="settle"):
+        sim.simulate(100.0, settle=-1.0)
+
+
+def test_unstable_step_is_detected_and_explained(sim):
+    with pytest.raises(R.SimulationDivergenceError, match="smaller integration step"):
+        sim.simulate(150.0, fs=200.0, n_samples=200, settle=0.0, substeps=1)
+
+
+def test_sweep_resumes_after_interruption(sim, tmp_path, monkeypatch):
+    speeds = [100.0, 140.0, 180.0]
+    kw = dict(fs=500.0, n_samples=200, settle=0.2, progress=False)
+    sim.sweep(speeds[:2], path=tmp_path / "sw", **kw)  # "interrupted" after two speeds
+    calls = []
+    original = R.RotorBearingSimulator.simulate
+
+    def counting(self, w, **k):
+        calls.append(w)
+        return original(self, w, **k)
+
+    monkeypatch.setattr(R.RotorBearingSimulator, "simulate", counting)
+    full = sim.sweep(speeds, path=tmp_path / "sw", **kw)
+    assert calls == [180.0]
+    fresh = R.RotorBearingSimulator().sweep(speeds, **kw)
+    pd.testing.assert_frame_equal(full.reset_index(drop=True), fresh, check_dtype=False)
+    assert R.load_sweep(tmp_path / "sw").attrs["settings"]["fs"] == 500.0
+    other = R.RotorBearingSimulator(R.RotorParameters(k1=9e5))
+    with pytest.raises(ValueError, match="different settings"):
+        other.sweep(speeds, path=tmp_path / "sw", **kw)
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".csv"])
+def test_save_and_load_with_settings(sim, tmp_path, suffix):
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    df = sim.sweep([120.0], fs=500.0, n_samples=50, settle=0.1, progress=False)
+    R.save_sweep(df, tmp_path / ("s" + suffix))
+    back = R.load_sweep(tmp_path / ("s" + suffix))
+    pd.testing.assert_frame_equal(back, df)
+    assert back.attrs["settings"]["params"]["kB"] == 13.34e9
+
+
+def test_run_up_includes_angular_acceleration(sim):
+    fs = 1000.0
+    run = sim.run_up(lambda t: 100.0 + 50.0 * t, fs=fs, duration=1.0, settle=0.5)
+    assert run.speed.iloc[0] == pytest.approx(100.0) and run.speed.iloc[-1] > 149.0
+    p = R.RotorParameters()
+    w, phi = run.speed.to_numpy(), run.phi.to_numpy()
+    expected = p.m_O1 * p.e * (w**2 * np.cos(phi) + 50.0 * np.sin(phi))
+    np.testing.assert_allclose(run.u, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    np.testing.assert_allclose(phi[-1], 100.0 * 0.999 + 25.0 * 0.999**2, rtol=1e-9)
+    # a constant profile equals a steady run
+    steady = sim.run_up(np.full(300, 120.0), fs=fs, settle=0.5)
+    ref = sim.simulate(120.0, fs=fs, n_samples=300, settle=0.5)
+    np.testing.assert_allclose(steady["xO1"], ref["xO1"], rtol=1e-12, atol=1e-15)
+
+
+def test_effects_compose_without_touching_the_integrator():
+    base = R.RotorBearingSimulator()
+    # partial rub: the 1.06 mm orbit at the peak touches a 0.8 mm clearance
+    rub = R.RotorBearingSimulator(effects=[R.Rub(clearance=8e-4, stiffness=2e7, friction=0.1)])
+    both = R.RotorBearingSimulator(effects=[
+        R.Rub(clearance=8e-4, stiffness=2e7, friction=0.1),
+        R.Rub(clearance=8e-4, stiffness=2e7, friction=0.1, at="O2"),
+    ])
+    kw = dict(fs=1000.0, n_samples=2048, settle=1.0)
+    a = base.simulate(144.5, **kw)
+    b = rub.simulate(144.5, **kw)
+    c = both.simulate(144.5, **kw)
+    amp = lambda r, d="xO1": order_components(r[d], r["phi"], (1, 2, 3))[0]  # noqa: E731
+    assert amp(b)[0] < 0.9 * amp(a)[0]  # contact limits the 1x amplitude at the peak
+    assert amp(b)[1] > 2 * amp(a)[1] and amp(b)[2] > 2 * amp(a)[2]  # and creates 2x, 3x
+    assert amp(c, "xO2")[0] < amp(b, "xO2")[0]
+
+
+def test_measurement_effects_runout_and_noise():
+    kw = dict(fs=1000.0, n_samples=2000, settle=1.0)
+    clean = R.RotorBearingSimulator().simulate(100.0, **kw)
+    ro = R.RotorBearingSimulator(effects=[R.ProbeRunout(amplitude=1e-5, phase=0.3)]).simulate(
+        100.0, **kw)
+    d = ro["xO1"] - clean["xO1"]
+    np.testing.assert_allclose(d, 1e-5 * np.cos(clean["phi"] + 0.3), atol=1e-15)
+    noisy = R.RotorBearingSimulator(effects=[R.MeasurementNoise(snr_db=20.0)], seed=3)
+    n1 = noisy.simulate(100.0, **kw)
+    resid = n1["xO1"] - clean["xO1"]
+    snr = 10 * np.log10(np.var(clean["xO1"]) / np.var(resid))
+    assert 19.0 < snr < 21.0
+    pd.testing.assert_frame_equal(n1, noisy.simulate(100.0, **kw))  # seeded
