@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
+from scipy.linalg.blas import dsyrk as syrk
 from threadpoolctl import threadpool_limits
 
 CHUNK_ROWS = 16384
@@ -31,14 +32,15 @@ CHUNK_ROWS = 16384
 
 class _GramAccumulator:
     def __init__(self, width):
-        self.G = np.zeros((width, width))
+        self.G = np.zeros((width, width), order="F")
 
     def add(self, block):
-        # BLAS syrk through the symmetric product; half the flops of a general GEMM.
-        self.G += block.T @ block
+        # BLAS syrk on a column-major block: half the flops of a general product, no copy.
+        self.G = syrk(1.0, np.asfortranarray(block), beta=1.0, c=self.G, trans=1, lower=0,
+                      overwrite_c=True)
 
     def finish(self):
-        G = self.G
+        G = np.triu(self.G) + np.triu(self.G, 1).T
         norms = np.sqrt(np.clip(np.diag(G), 0.0, None))
         safe = np.where(norms > 0, norms, 1.0)
         Gn = G / safe[:, None] / safe[None, :]
@@ -84,16 +86,24 @@ def compress(blocks, width: int, solver: str = "gram", blas_threads: int | None 
 def termset_blocks(termset, u, y, start: int, chunk: int = CHUNK_ROWS):
     """Row blocks of ``[P, y]`` for samples ``start..N-1``, built on the fly."""
     n = len(y)
+    width = termset.exponents.shape[0] + 1
+    buf = np.empty((min(chunk, max(n - start, 0)), width), order="F")
     for a in range(start, n, chunk):
         b = min(a + chunk, n)
-        yield np.column_stack([termset.evaluate(u, y, a, b), y[a:b]])
+        block = buf[: b - a]
+        termset.evaluate(u, y, a, b, out=block[:, :-1])
+        block[:, -1] = y[a:b]
+        yield block
 
 
 def matrix_blocks(P, y, chunk: int = CHUNK_ROWS):
     """Row blocks of ``[P, y]`` from an in-memory regressor matrix (same chunking)."""
     for a in range(0, len(y), chunk):
         b = min(a + chunk, len(y))
-        yield np.column_stack([P[a:b], y[a:b]])
+        block = np.empty((b - a, P.shape[1] + 1), order="F")
+        block[:, :-1] = P[a:b]
+        block[:, -1] = y[a:b]
+        yield block
 
 
 @dataclass

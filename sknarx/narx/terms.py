@@ -143,29 +143,33 @@ class TermSet:
             out.append(ensure(key))
         return np.array(plan, dtype=np.int64).reshape(-1, 2), np.array(out, dtype=np.int64)
 
-    def lagged(self, u, y, start: int, stop: int) -> np.ndarray:
-        """Lagged variables for samples ``start <= t < stop``; needs ``start >= max_lag``."""
+    def lagged(self, u, y, start: int, stop: int) -> list[np.ndarray]:
+        """Lagged variables for samples ``start <= t < stop`` as views (no copies)."""
         cols = [y[start - i : stop - i] for i in range(1, self.ny + 1)]
         cols += [u[start - i : stop - i] for i in range(1, self.nu + 1)]
-        if not cols:
-            return np.empty((stop - start, 0))
-        return np.column_stack(cols)
+        return cols
 
-    def evaluate(self, u, y, start: int, stop: int) -> np.ndarray:
-        """Regressor matrix of shape ``(stop - start, n_terms)`` for samples ``start..stop-1``."""
+    def evaluate(self, u, y, start: int, stop: int, out=None) -> np.ndarray:
+        """Regressor matrix of shape ``(stop - start, n_terms)`` for samples ``start..stop-1``.
+
+        Needs ``start >= max_lag``. With ``out`` (a Fortran-ordered array of that
+        shape) the columns are written in place; column-major storage keeps every
+        write contiguous.
+        """
         lag = self.lagged(u, y, start, stop)
-        plan, out = self._plan
+        plan, order = self._plan
         n = stop - start
-        cache = np.empty((n, len(plan)))
+        cache = np.empty((n, len(plan)), order="F")
         for i, (parent, var) in enumerate(plan):
             if parent < 0:
-                cache[:, i] = lag[:, var]
+                cache[:, i] = lag[var]
             else:
-                np.multiply(cache[:, parent], lag[:, var], out=cache[:, i])
-        result = np.empty((n, len(out)))
-        for j, src in enumerate(out):
+                np.multiply(cache[:, parent], lag[var], out=cache[:, i])
+        if out is None:
+            out = np.empty((n, len(order)), order="F")
+        for j, src in enumerate(order):
             if src < 0:
-                result[:, j] = 1.0
+                out[:, j] = 1.0
             else:
-                result[:, j] = cache[:, src]
-        return result
+                out[:, j] = cache[:, src]
+        return out

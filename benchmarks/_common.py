@@ -1,0 +1,55 @@
+"""Shared helpers of the benchmarks: timing medians, tables, JSON output, BLAS control."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def timeit(fn, repeat=5):
+    """Median and all wall times (s) of ``repeat`` calls; returns the last result too."""
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), times, out
+
+
+def machine():
+    from threadpoolctl import threadpool_info
+
+    return {
+        "python": platform.python_version(),
+        "cpu_count": os.cpu_count(),
+        "blas": [{k: i.get(k) for k in ("internal_api", "num_threads", "version")}
+                 for i in threadpool_info()],
+    }
+
+
+def table(rows, headers):
+    widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(headers)]
+    line = "  ".join(str(h).ljust(w) for h, w in zip(headers, widths, strict=True))
+    print(line)
+    print("-" * len(line))
+    for r in rows:
+        print("  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)))
+
+
+def write_json(name, payload):
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    payload = {"machine": machine(), **payload}
+    path.write_text(json.dumps(payload, indent=1, default=float))
+    print(f"\nwrote {path}")
+    return path
