@@ -93,7 +93,7 @@ def main(repeat=3):
             "median_s": t_sweep, "times_s": sweep_times, "rows": len(df), "target_s": 10.0,
         },
     }
-    one, sw = results["one_speed"], results["paper_sweep"]
+    one = results["one_speed"]
     table(
         [
             ["one speed, 2 s", f"{t_ours * 1e3:.1f} ms", f"{t_ivp:.2f} s (RK45 1e-6)",
