@@ -86,6 +86,12 @@ def model_from_json(source):
         raw, index=names, columns=[f"beta{j}" for j in range(raw.shape[1])]
     )
     model.output_scale_ = doc["output_scale"]
+    model.coef_spline_ = None
+    if model.speed_basis == "spline" and speeds is not None:
+        from .narx.scheduling import _spline
+
+        # the spline is a deterministic function of the per-speed coefficients
+        model.coef_spline_ = _spline(speeds, model.coef_per_speed_.to_numpy())
     try:
         model.exponents_, model.ny_, model.nu_ = parse_terms(names)
     except ValueError:

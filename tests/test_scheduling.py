@@ -208,3 +208,16 @@ def test_bad_speeds(sweep):
         m.fit(data, SPEEDS[:3])
     with pytest.raises(ValueError, match="finite"):
         m.fit(data[:5], np.r_[SPEEDS[:4], np.nan])
+
+
+def test_spline_speed_basis_interpolates_per_speed_coefficients_and_round_trips(sweep):
+    data, _ = sweep
+    m = SpeedScheduledNarx(ny=2, nu=2, degree=3, esr=1e-9, coef_degree=2,
+                           speed_basis="spline").fit(data, SPEEDS)
+    np.testing.assert_allclose(m.coefficients_at(SPEEDS), m.coef_per_speed_.to_numpy(),
+                               rtol=1e-12, atol=1e-15)
+    m2 = model_from_json(m.to_json())
+    w = np.linspace(85, 275, 7)
+    np.testing.assert_array_equal(m2.coefficients_at(w), m.coefficients_at(w))
+    with pytest.raises(ValueError, match="at least 3"):
+        SpeedScheduledNarx(ny=1, nu=1, degree=1, speed_basis="spline").fit(data[:2], SPEEDS[:2])

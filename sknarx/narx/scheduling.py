@@ -22,6 +22,14 @@ from .terms import TermSet, monomial_exponents, parse_terms, term_names
 __all__ = ["SpeedScheduledNarx", "SpeedExtrapolationWarning"]
 
 
+def _spline(speeds, coef):
+    from scipy.interpolate import CubicSpline
+
+    order = np.argsort(speeds)
+    return CubicSpline(np.asarray(speeds)[order], np.asarray(coef)[order], axis=0,
+                       bc_type="natural")
+
+
 class SpeedExtrapolationWarning(UserWarning):
     """A requested speed lies outside the range of the fitted speeds."""
 
@@ -56,6 +64,11 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         Largest number of selected terms.
     coef_degree : int, default=3
         Degree of the coefficient polynomials in speed (the paper uses 3).
+    speed_basis : {'polynomial', 'spline'}, default='polynomial'
+        How coefficients depend on speed: one global least-squares polynomial of
+        degree ``coef_degree`` (the paper), or a natural cubic spline through the
+        per-speed coefficients, which follows sharp changes near a critical
+        speed without the oscillation of a global polynomial.
     solver : {'gram', 'qr'}, default='gram'
         Compression of each dataset; see :class:`CommonStructureEFOR`.
     tol : float, default=1e-12
@@ -121,6 +134,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         "esr": [Interval(Real, 0, 100, closed="both")],
         "max_terms": [Interval(Integral, 1, None, closed="left"), None],
         "coef_degree": [Interval(Integral, 0, None, closed="left")],
+        "speed_basis": [StrOptions({"polynomial", "spline"})],
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
         "prune": ["boolean"],
@@ -134,6 +148,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         esr=0.01,
         max_terms=None,
         coef_degree=3,
+        speed_basis="polynomial",
         solver="gram",
         tol=1e-12,
         prune=True,
@@ -144,6 +159,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.esr = esr
         self.max_terms = max_terms
         self.coef_degree = coef_degree
+        self.speed_basis = speed_basis
         self.solver = solver
         self.tol = tol
         self.prune = prune
@@ -248,7 +264,12 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 f"Duplicate speeds {uniq[counts > 1].tolist()} rad/s: each dataset needs its own "
                 "speed. Merge or drop repeated records."
             )
-        if speeds.size < self.coef_degree + 1:
+        if self.speed_basis == "spline" and speeds.size < 3:
+            raise ValueError(
+                f"{speeds.size} speed(s) are too few for speed_basis='spline': at least 3 are "
+                "needed."
+            )
+        if self.speed_basis == "polynomial" and speeds.size < self.coef_degree + 1:
             raise ValueError(
                 f"{speeds.size} speed(s) cannot determine coefficient polynomials of degree "
                 f"{self.coef_degree}: at least {self.coef_degree + 1} distinct speeds are "
@@ -265,6 +286,9 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             return
         a, b = float(np.min(speeds)), float(np.max(speeds))
         self.speed_range_ = (a, b)
+        self.coef_spline_ = None
+        if self.speed_basis == "spline":
+            self.coef_spline_ = _spline(speeds, coef)
         J = self.coef_degree
         if a == b:  # a single speed (then coef_degree is 0): constant coefficients
             self.coef_poly_ = coef[:1].T.copy()
@@ -309,6 +333,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 SpeedExtrapolationWarning,
                 stacklevel=2,
             )
+        if getattr(self, "coef_spline_", None) is not None:
+            return self.coef_spline_(w)
         s = (2.0 * w - a - b) / (b - a) if b > a else np.zeros_like(w)
         return np.moveaxis(np.polynomial.polynomial.polyval(s, self.coef_poly_.T), 0, -1)
 
