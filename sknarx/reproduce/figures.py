@@ -1,0 +1,141 @@
+"""Figures of the reproduction, numbered as in the paper where they correspond."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..orders import spectrum
+from ..plotting import plt, save
+
+MODEL_STYLE = {
+    "paper": dict(color="tab:red", ls="--", label="paper's method (steady data, cubic)"),
+    "improved": dict(color="tab:blue", ls="-", label="from-rest data, cubic"),
+    "improved-spline": dict(color="tab:green", ls="-", label="from-rest data, spline"),
+    "single-speed": dict(color="tab:purple", ls=":", label="single-speed NARX"),
+    "per-band": dict(color="tab:orange", ls="-.", label="per-band NARX (Ma et al.)"),
+}
+
+
+def make_figures(st, out: Path) -> dict:
+    """Write every figure; returns ``{key: path}``."""
+    out = Path(out)
+    c = st.case
+    figs = {}
+    um = 1e3  # m -> mm
+
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    ax.plot(st.curve.speed, st.curve.amplitude * um, "k-", label="nonlinear (time simulation)")
+    ax.plot(st.curve.speed, st.curve.linear_amplitude * um, "c--", lw=1,
+            label="linearised bearings")
+    ax.axvline(st.critical_speed, color="r", lw=0.8)
+    ax.annotate(f"peak {st.critical_speed:.1f} rad/s\n(paper 144.5)",
+                (st.critical_speed, st.curve.amplitude.max() * um), xytext=(10, -30),
+                textcoords="offset points", fontsize=8)
+    ax.set(xlabel="speed (rad/s)", ylabel=f"{c.output} amplitude (mm)",
+           title="Fig. 2 - amplitude response of disk O1, x")
+    ax.legend(fontsize=8)
+    figs["fig2"] = save(fig, out / "fig2_amplitude_curve.png")
+
+    fig = plt.figure(figsize=(6.5, 4.2))
+    ax = fig.add_subplot(projection="3d")
+    for w, g in st.waterfall.groupby("speed"):
+        ax.plot(g.frequency, np.full(len(g), w), np.log10(g.amplitude * um + 1e-9), lw=0.7,
+                color="k")
+    ax.set(xlabel="frequency (Hz)", ylabel="speed (rad/s)", zlabel="log10 amplitude (mm)",
+           title="Fig. 3 - waterfall of disk O1, x")
+    ax.view_init(elev=28, azim=-60)
+    figs["fig3"] = save(fig, out / "fig3_waterfall.png")
+
+    for n, (w, run) in zip((4, 5, 6), st.figure_runs.items(), strict=True):
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(8, 2.8))
+        last = run.iloc[-400:]
+        a1.plot(last.t, last[c.output] * um, "k", lw=0.8)
+        a1.set(xlabel="t (s)", ylabel=f"{c.output} (mm)", title=f"(a) time, {w} rad/s")
+        f, a = spectrum(run[c.output].to_numpy(), c.fs)
+        a2.semilogy(f, a * um, "k", lw=0.8)
+        fr = w / (2 * np.pi)
+        for k in (1, 2, 3):
+            a2.axvline(k * fr, color="r", lw=0.5, ls=":")
+        a2.set(xlim=(0, 200), ylim=(1e-7, None), xlabel="frequency (Hz)",
+               ylabel="amplitude (mm)", title=f"(b) spectrum (1x = {fr:.1f} Hz)")
+        figs[f"fig{n}"] = save(fig, out / f"fig{n}_response_{w:g}.png")
+
+    for n, w in zip((8, 9, 10), c.validation_speeds, strict=True):
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(8.5, 3))
+        tr = st.validation_traces[("improved-spline", float(w))]
+        t, y, half = tr["t"], tr["y"], tr["half"]
+        sl = slice(half, half + 300)
+        a1.plot(t[sl], y[sl] * um, "k", lw=2, alpha=0.4, label="simulator (true)")
+        for name in ("improved-spline", "paper"):
+            trm = st.validation_traces[(name, float(w))]
+            a1.plot(t[sl], trm["y_rest"][sl] * um, lw=0.9, **_style(name))
+        a1.set(xlabel="t (s)", ylabel=f"{c.output} (mm)", title=f"(a) time, {w} rad/s")
+        a1.legend(fontsize=7)
+        f, a = spectrum(y[half:], c.fs)
+        a2.semilogy(f, a * um, "k", lw=2, alpha=0.4)
+        for name in ("improved-spline", "paper"):
+            yh = st.validation_traces[(name, float(w))]["y_rest"][half:]
+            if np.all(np.isfinite(yh)):
+                fh, ah = spectrum(yh, c.fs)
+                a2.semilogy(fh, ah * um, lw=0.8, **_style(name, label=False))
+        a2.set(xlim=(0, 200), ylim=(1e-7, None), xlabel="frequency (Hz)",
+               ylabel="amplitude (mm)", title="(b) spectrum")
+        figs[f"fig{n}"] = save(fig, out / f"fig{n}_validation_{w:g}.png")
+
+    fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    for name, g in st.cv.groupby("method"):
+        ax.semilogy(g.held_out_speed, g.nrmse_from_rest, marker="o", ms=3, **_style(name))
+    ax.axvline(st.critical_speed, color="r", lw=0.8)
+    ax.set(xlabel="held-out speed (rad/s)", ylabel="free-run NRMSE from rest",
+           title="Leave-one-speed-out cross-validation")
+    ax.legend(fontsize=7)
+    figs["cv"] = save(fig, out / "cv_error_vs_speed.png")
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 4.6), sharex=True)
+    r = st.runup
+    a1.plot(r["t"], r["y"] * um, "k", lw=0.6, alpha=0.5, label="simulator (true)")
+    for name in ("improved-spline", "paper"):
+        a1.plot(r["t"], r[name] * um, lw=0.5, **_style(name))
+    a1.set(ylabel=f"{c.output} (mm)", title="Run-up through the critical speed")
+    a1.legend(fontsize=7, loc="upper right")
+    for name in ("improved-spline", "improved", "paper"):
+        a2.semilogy(r["t"], np.abs(r[name] - r["y"]) * um + 1e-9, lw=0.5, **_style(name))
+    a2.set(xlabel="t (s)", ylabel="|error| (mm)")
+    ax2 = a1.twinx()
+    ax2.plot(r["t"], r["speed"], "r", lw=0.6)
+    ax2.set_ylabel("speed (rad/s)", color="r")
+    figs["runup"] = save(fig, out / "runup.png")
+
+    model = st.models["improved"]
+    spl = st.models["improved-spline"]
+    names = model.selected_terms_
+    fig, axes = plt.subplots(2, 5, figsize=(12, 4.4))
+    grid = np.linspace(min(c.speeds), max(c.speeds), 200)
+    for ax, term in zip(axes.ravel(), names, strict=False):
+        j = names.index(term)
+        ax.plot(c.speeds, model.coef_per_speed_[term], "ko", ms=3)
+        ax.plot(grid, model.coefficients_at(grid)[:, j], "b-", lw=0.8)
+        ax.plot(grid, spl.coefficients_at(grid)[:, j], "g-", lw=0.8)
+        ax.set_title(term, fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.suptitle("Coefficients against speed: per-speed (dots), cubic (blue), spline (green)")
+    figs["coefficients"] = save(fig, out / "coefficients_vs_speed.png")
+
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    for (mode, whirl), g in st.campbell.groupby(["mode", "whirl"]):
+        ax.plot(g.speed, g.frequency, "b." if whirl == "forward" else "m.", ms=3)
+    ax.plot([0, 320], [0, 320], "k:", label="1x")
+    ax.set(ylim=(0, 1000), xlabel="speed (rad/s)", ylabel="natural frequency (rad/s)",
+           title="Campbell diagram (forward blue, backward magenta)")
+    ax.legend(fontsize=8)
+    figs["campbell"] = save(fig, out / "campbell.png")
+    return figs
+
+
+def _style(name, label=True):
+    s = dict(MODEL_STYLE.get(name, dict(label=name)))
+    if not label:
+        s.pop("label", None)
+    return s
