@@ -49,7 +49,8 @@ def _paper(args) -> int:
         bar.close()
     out = Path(args.out)
     val = metrics["validation"]
-    print(f"\nWrote {out / 'report.html'} (open it first), metrics.json, figures, tables, model.json")
+    print(f"\nWrote {out / 'report.html'} (open it first), metrics.json, figures, tables, "
+          "model.json")
     print(f"critical speed {metrics['critical_speed']:.1f} rad/s (paper 144.5); "
           f"{len(metrics['selected_terms'])} terms, total AERR {metrics['aerr_total']:.6f} %")
     for v in val:

@@ -5,12 +5,14 @@ from .freerun import FreeRunDivergenceError
 from .scheduling import SpeedExtrapolationWarning, SpeedScheduledNarx
 from .scoring import free_run_nrmse, free_run_scorer, nrmse
 from .selection import CommonStructureEFOR, IllConditionedWarning
+from .splitters import LeaveOneSpeedOut
 from .terms import monomial_exponents, n_candidate_terms, parse_terms, term_names
 
 __all__ = [
     "NarxTermDictionary",
     "CommonStructureEFOR",
     "SpeedScheduledNarx",
+    "LeaveOneSpeedOut",
     "FreeRunDivergenceError",
     "SpeedExtrapolationWarning",
     "IllConditionedWarning",

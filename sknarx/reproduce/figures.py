@@ -124,7 +124,7 @@ def make_figures(st, out: Path) -> dict:
     figs["coefficients"] = save(fig, out / "coefficients_vs_speed.png")
 
     fig, ax = plt.subplots(figsize=(6, 3.4))
-    for (mode, whirl), g in st.campbell.groupby(["mode", "whirl"]):
+    for (_mode, whirl), g in st.campbell.groupby(["mode", "whirl"]):
         ax.plot(g.speed, g.frequency, "b." if whirl == "forward" else "m.", ms=3)
     ax.plot([0, 320], [0, 320], "k:", label="1x")
     ax.set(ylim=(0, 1000), xlabel="speed (rad/s)", ylabel="natural frequency (rad/s)",

@@ -155,7 +155,8 @@ def _html(st, m, figs) -> str:
     for _, r in rec.iterrows():
         checks.append((f"Validation {r.speed:g} rad/s: steady NRMSE <= 5 %, 1x error <= 2 %",
                        f"NRMSE {_fmt(r.nrmse, True)}, 1x {_fmt(r.amp1x_rel_error, True)}",
-                       r.nrmse <= LIMITS["nrmse"] and r.amp1x_rel_error <= LIMITS["amp1x_rel_error"]))
+                       r.nrmse <= LIMITS["nrmse"]
+                       and r.amp1x_rel_error <= LIMITS["amp1x_rel_error"]))
     check_rows = "".join(
         f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td>"
         f"<td class={'ok' if ok else 'bad'}>{'pass' if ok else 'FAIL'}</td></tr>"

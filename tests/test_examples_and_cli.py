@@ -1,0 +1,53 @@
+"""The examples run as written, and ``sknarx paper`` works end to end (quick mode)."""
+
+import json
+import runpy
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_example_runs(path, capsys):
+    runpy.run_path(str(path), run_name="__main__")
+    assert capsys.readouterr().out
+
+
+def test_paper_command_quick(tmp_path):
+    out = tmp_path / "paper"
+    res = subprocess.run([sys.executable, "-m", "sknarx", "paper", "--out", str(out), "--quick",
+                          "--quiet"], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("critical_speed", "selected_terms", "aerr", "validation", "settings"):
+        assert key in m
+    assert {"speed", "nrmse", "amp1x_rel_error"} <= set(m["validation"][0])
+    assert m["settings"]["sampling_rate_hz"] == 1000.0
+    assert "sknarx paper" in m["command"]
+    html = (out / "report.html").read_text()
+    assert "data:image/png;base64," in html and m["sknarx_version"] in html
+    for name in ("table3_terms_aerr.csv", "table4_coefficient_functions.csv", "model.json",
+                 "fig2_amplitude_curve.png", "fig10_validation_213.6.png", "runup.png"):
+        assert (out / name).exists(), name
+
+
+def test_cli_reports_bad_usage():
+    res = subprocess.run([sys.executable, "-m", "sknarx", "paper"], capture_output=True,
+                         text=True)
+    assert res.returncode != 0 and "--out" in res.stderr
+
+
+def test_api_reference_is_generated_from_current_docstrings():
+    sys.path.insert(0, str(ROOT / "docs"))
+    import gen_api
+
+    text = gen_api.render()
+    assert (ROOT / "docs" / "api.md").read_text() == text, "run python docs/gen_api.py"
+    for name in ("SpeedScheduledNarx", "CommonStructureEFOR", "NarxTermDictionary",
+                 "RotorBearingSimulator", "Examples"):
+        assert name in text
