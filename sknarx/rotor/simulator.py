@@ -233,8 +233,11 @@ class RotorBearingSimulator:
         n_samples : int, default=8192
             Recorded samples (after settling).
         settle : float, default=2.0
-            Seconds simulated and discarded first (transient decay: the slowest
-            mode's time constant is about 0.04 s, so 2 s is ~50 of them).
+            Seconds simulated and discarded first. The dominant first mode
+            (damping ratio ~0.27) decays in ~0.03 s; the slowest mode, the lightly
+            damped backward conical mode (~264 rad/s, damping ratio ~0.01, time
+            constant ~0.4 s), is barely excited by unbalance; 2 s is five of its
+            time constants.
         substeps : int, optional
             RK4 steps per sample; chosen from ``step_factor`` by default.
 
