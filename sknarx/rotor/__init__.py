@@ -1,12 +1,17 @@
 """The physics simulator: parameters, model matrices, bearings, integrator, effects."""
 
 from .effects import (
+    EFFECTS,
+    BreathingCrack,
     ClearanceChange,
     Effect,
+    JointLooseness,
     MeasurementNoise,
+    Misalignment,
     ProbeRunout,
     Rub,
     SpeedFluctuation,
+    SupportAnisotropy,
 )
 from .linear import LinearRotorModel
 from .matrices import RotorMatrices, assemble
@@ -23,7 +28,12 @@ __all__ = [
     "assemble",
     "LinearRotorModel",
     "Effect",
+    "EFFECTS",
     "Rub",
+    "Misalignment",
+    "BreathingCrack",
+    "JointLooseness",
+    "SupportAnisotropy",
     "ProbeRunout",
     "MeasurementNoise",
     "SpeedFluctuation",

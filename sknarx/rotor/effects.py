@@ -2,25 +2,25 @@
 
 An effect acts at one (or more) of four places in the data flow:
 
-1. **parameters** -- it changes the nominal :class:`RotorParameters` (e.g. a
-   bearing-clearance change);
+1. **parameters** -- it changes the nominal :class:`RotorParameters` (bearing
+   clearance);
 2. **forces** -- it adds generalised forces through a numba-compiled kernel
-   ``kernel(t, phi, omega, alpha, q, v, params, out)`` (e.g. rotor-stator rub);
-   the simulator chains the kernels of all active effects into the integrator's
-   single hook;
-3. **speed** -- it changes the speed profile (e.g. speed fluctuation);
-4. **measurement** -- it changes what the probes see after the simulation (e.g.
-   slow-roll runout, noise).
+   ``kernel(t, phi, omega, alpha, q, v, params, out)`` (rub, misalignment, crack,
+   joint looseness, support flexibility); the simulator chains the kernels of all
+   active effects into the integrator's single hook;
+3. **speed** -- it changes the speed profile (speed fluctuation);
+4. **measurement** -- it changes what the probes see (runout, noise).
 
-A new effect subclasses :class:`Effect` and overrides what it needs; nothing else
-changes. The canonical names (``rub``, ``runout``, ...) are used in reports and
-JSON.
+Every effect has a canonical ``name`` (used in reports and JSON), a few physical
+parameters with ``bounds`` (and whether they are searched on a log scale), and a
+``signature``: what it is expected to do to the response. A new effect subclasses
+:class:`Effect` and overrides what it needs; nothing else changes.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import lru_cache
 
 import numpy as np
@@ -32,26 +32,41 @@ from .parameters import DOF_NAMES
 __all__ = [
     "Effect",
     "Rub",
+    "Misalignment",
+    "BreathingCrack",
+    "JointLooseness",
+    "ClearanceChange",
+    "SupportAnisotropy",
     "ProbeRunout",
     "MeasurementNoise",
     "SpeedFluctuation",
-    "ClearanceChange",
+    "EFFECTS",
     "compose_force_kernels",
 ]
+
+_IDX = {n: i for i, n in enumerate(DOF_NAMES)}
 
 
 @dataclass
 class EffectContext:
     """What an effect may need to know about the simulator it joins."""
 
-    q_static: np.ndarray  # static equilibrium displacements, m / rad
-    dof_index: dict = field(default_factory=lambda: {n: i for i, n in enumerate(DOF_NAMES)})
+    q_static: np.ndarray  # static equilibrium, m / rad
+    params: object = None  # effective RotorParameters
+    bearing_stiffness: tuple = ()  # (K_A, K_B) averaged 2x2 tangent stiffness, N/m
+    dof_index: dict = field(default_factory=lambda: dict(_IDX))
 
 
 class Effect:
-    """Base class: an effect that does nothing. Override the hooks you need."""
+    """Base class: an effect that does nothing. Override the hooks you need.
+
+    Class attributes: ``name`` (canonical), ``bounds`` (``{param: (lo, hi, scale)}``
+    with scale ``'lin'`` or ``'log'``), ``signature`` (expected evidence).
+    """
 
     name = "none"
+    bounds: dict = {}
+    signature = ""
 
     def modify_parameters(self, params):
         return params
@@ -64,15 +79,30 @@ class Effect:
         return omega
 
     def measure(self, table, rng):
-        """Change the recorded table (a DataFrame with DOF columns) in place or return a new one."""
+        """Change the recorded table (DOF columns, m) and return it."""
         return table
 
+    # -- calibration interface -------------------------------------------------
+    @classmethod
+    def param_names(cls) -> list[str]:
+        return list(cls.bounds)
+
+    def vector(self) -> np.ndarray:
+        return np.array([getattr(self, n) for n in self.param_names()], dtype=float)
+
+    @classmethod
+    def from_vector(cls, x):
+        return cls(**{n: float(v) for n, v in zip(cls.param_names(), x, strict=True)})
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
     def __repr__(self):
-        fields_ = ", ".join(f"{k}={v!r}" for k, v in vars(self).items())
-        return f"{type(self).__name__}({fields_})"
+        body = ", ".join(f"{k}={v!r}" for k, v in self.to_dict().items())
+        return f"{type(self).__name__}({body})"
 
 
-# --------------------------------------------------------------------- forces
+# ---------------------------------------------------------------- force kernels
 @njit(nogil=True, cache=True)
 def _rub_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     ix, iy = int(p[0]), int(p[1])
@@ -83,7 +113,7 @@ def _rub_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     if r > gap:
         fn = kr * (r - gap)
         cx, cy = x / r, y / r
-        # normal force inward; Coulomb friction opposing the surface speed of a
+        # normal force inward; Coulomb friction against the surface speed of a
         # forward-spinning shaft (tangent direction (-cy, cx))
         out[ix] += -fn * cx + mu * fn * cy
         out[iy] += -fn * cy - mu * fn * cx
@@ -93,21 +123,12 @@ def _rub_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
 class Rub(Effect):
     """Rotor-stator rub at a disk: radial contact beyond a clearance, with friction.
 
-    ``F_n = k_c (r - c)`` for ``r > c`` (``r`` the disk's radial displacement from
-    the stator centre, set at the static equilibrium), friction ``mu F_n``
-    tangential against the spin. Signature: truncated orbits, 2x/3x and
-    sub-synchronous (1/2x) components, strongest where the amplitude peaks.
+    ``F_n = k_c (r - c)`` for ``r > c`` (``r``: the disk's radial displacement from
+    the stator centre, placed at the static equilibrium), Coulomb friction
+    ``mu F_n`` against the spin (Muszynska, *Rotordynamics*, 2005, ch. 7).
 
-    Parameters
-    ----------
-    clearance : float
-        Radial rotor-stator gap, m.
-    stiffness : float
-        Contact stiffness, N/m.
-    friction : float
-        Coulomb friction coefficient.
-    at : str
-        Disk, ``'O1'`` or ``'O2'``.
+    Parameters: ``clearance`` (m), ``stiffness`` (N/m), ``friction`` (-), ``at``
+    (``'O1'`` or ``'O2'``).
     """
 
     clearance: float = 5e-4
@@ -115,12 +136,180 @@ class Rub(Effect):
     friction: float = 0.1
     at: str = "O1"
     name = "rub"
+    bounds = {"clearance": (1e-4, 2e-3, "log"), "stiffness": (1e5, 1e8, "log"),
+              "friction": (0.0, 0.3, "lin")}
+    signature = ("amplitude clipped near the response peak; 2x, 3x and sub-synchronous "
+                 "(1/2x, 1/3x) orders where the orbit exceeds the clearance")
 
     def force_kernel(self, context):
         ix, iy = context.dof_index["x" + self.at], context.dof_index["y" + self.at]
         p = np.array([ix, iy, context.q_static[ix], context.q_static[iy], self.clearance,
                       self.stiffness, self.friction], dtype=float)
         return _rub_kernel, p
+
+
+@njit(nogil=True, cache=True)
+def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    ix, iy = int(p[0]), int(p[1])
+    kc, par, ang, lc = p[2], p[3], p[4], p[5]
+    # parallel offset: a pulsating force at twice the shaft angle along the offset
+    # (horizontal); angular: a 1x bending moment, seen at the journal as a force
+    f2 = kc * par * 0.5 * (1.0 - math.cos(2.0 * phi))
+    f1 = kc * lc * ang
+    out[ix] += -f2 - f1 * math.cos(phi)
+    out[iy] += -f1 * math.sin(phi)
+
+
+@dataclass(repr=False)
+class Misalignment(Effect):
+    """Coupling misalignment at bearing A (the drive end).
+
+    Phenomenological model after Redmond & Al-Hussain (J. Sound Vib. 2010): a
+    flexible coupling of lateral stiffness ``k_c = 1e6 N/m`` and length
+    ``L_c = 0.1 m`` transmits, for a parallel offset ``parallel`` (m, horizontal),
+    a force ``k_c parallel (1 - cos 2 phi)/2`` (static preload + 2x) and, for an
+    angular misalignment ``angular`` (rad), a rotating 1x force
+    ``k_c L_c angular``. Signature: 2x at the drive-end journal and the disks,
+    growing with offset but not with speed; a static shift (invisible to
+    AC-coupled probes); for angular misalignment a speed-independent 1x vector.
+    """
+
+    parallel: float = 1e-4
+    angular: float = 0.0
+    name = "misalignment"
+    bounds = {"parallel": (0.0, 1e-3, "lin"), "angular": (0.0, 5e-3, "lin")}
+    signature = "2x at every speed (not growing with speed^2), strongest at bearing A; 1x offset"
+    K_C = 1e6
+    L_C = 0.1
+
+    def force_kernel(self, context):
+        p = np.array([context.dof_index["xA"], context.dof_index["yA"], self.K_C,
+                      self.parallel, self.angular, self.L_C], dtype=float)
+        return _misalignment_kernel, p
+
+
+@njit(nogil=True, cache=True)
+def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    dk, psi, a1 = p[0], p[1], p[2]
+    # deformation of segment A-O1 in the two planes (see matrices.py)
+    dx = q[2] - q[0] - a1 * q[5]
+    dy = q[3] - q[1] + a1 * q[4]
+    nx, ny = math.cos(phi + psi), math.sin(phi + psi)
+    xi = nx * dx + ny * dy
+    # gravity-driven breathing (Mayes & Davies): fully open when the crack faces down
+    h = 0.5 * (1.0 - math.cos(phi + psi + 0.5 * math.pi))
+    f = dk * h * xi  # the cracked direction loses stiffness dk: add back dk*h*xi
+    fx, fy = f * nx, f * ny
+    out[0] -= fx
+    out[2] += fx
+    out[5] -= a1 * fx
+    out[1] -= fy
+    out[3] += fy
+    out[4] += a1 * fy
+
+
+@dataclass(repr=False)
+class BreathingCrack(Effect):
+    """Breathing transverse crack in shaft segment A-O1.
+
+    The segment loses a fraction ``depth`` of its stiffness ``k1`` in the
+    direction normal to the crack, which rotates with the shaft at angle
+    ``phi + angle``; gravity opens and closes it once per revolution with the
+    breathing function ``h = (1 - cos(phi + angle + pi/2))/2`` (Mayes & Davies,
+    1984; Gasch, J. Sound Vib. 1993). Signature: 2x (and 3x) rising near half
+    the critical speed; a small 1x change.
+    """
+
+    depth: float = 0.1
+    angle: float = 0.0
+    name = "crack"
+    bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin")}
+    signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
+
+    def force_kernel(self, context):
+        p = np.array([self.depth * context.params.k1, self.angle, context.params.a1])
+        return _crack_kernel, p
+
+
+@njit(nogil=True, cache=True)
+def _looseness_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    lkb, lkt, d, gap = p[0], p[1], p[2], p[3]
+    for plane in range(2):
+        if plane == 0:  # x-z plane: slopes are ty
+            i1, j1, i2, j2, sg = 2, 5, 6, 9, 1.0
+        else:  # y-z plane: slopes are -tx
+            i1, j1, i2, j2, sg = 3, 4, 7, 8, -1.0
+        w1, s1, w2, s2 = q[i1], sg * q[j1], q[i2], sg * q[j2]
+        dj = w2 - w1 - 0.5 * d * (s1 + s2)
+        if abs(dj) > gap:
+            # the joint's restoring force is -k dj d(dj)/dq; removing the lost share
+            # adds +k_lost dj d(dj)/dq (piecewise: only once the interface has opened)
+            fj = lkb * (dj - math.copysign(gap, dj))
+            ft = lkt * (s2 - s1)
+            out[i1] -= fj
+            out[i2] += fj
+            out[j1] += sg * (-0.5 * d * fj - ft)
+            out[j2] += sg * (-0.5 * d * fj + ft)
+
+
+@dataclass(repr=False)
+class JointLooseness(Effect):
+    """Bolted-joint loosening: the joint loses a fraction of ``kb`` and ``k_theta``.
+
+    ``residual`` is the fraction of the joint stiffness left once the interface
+    opens beyond ``gap`` (m) of relative lateral displacement (piecewise-linear
+    contact, after Qin et al., J. Sound Vib. 2014). Signature: a lower response
+    peak frequency and harmonics (2x, 3x, 1/2x) from the bilinear stiffness.
+    """
+
+    residual: float = 0.1
+    gap: float = 0.0
+    name = "looseness"
+    bounds = {"residual": (1e-4, 1.0, "log"), "gap": (0.0, 2e-5, "lin")}
+    signature = "shift of the response peak, harmonics and subharmonics from bilinear contact"
+
+    def force_kernel(self, context):
+        P = context.params
+        loss = 1.0 - self.residual
+        return _looseness_kernel, np.array([loss * P.kb, loss * P.k_theta, P.a2 - P.a1,
+                                            self.gap])
+
+
+@njit(nogil=True, cache=True)
+def _support_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    # linear series compliance of the pedestals, about the static equilibrium
+    for b in range(2):
+        ix, iy = int(p[6 * b]), int(p[6 * b + 1])
+        out[ix] -= p[6 * b + 2] * (q[ix] - p[6 * b + 4])
+        out[iy] -= p[6 * b + 3] * (q[iy] - p[6 * b + 5])
+
+
+@dataclass(repr=False)
+class SupportAnisotropy(Effect):
+    """Flexible, anisotropic foundation: pedestals of stiffness ``kx``, ``ky`` (N/m).
+
+    Each bearing sits on a pedestal in series with its Hertzian contact. With the
+    contact's tangent stiffness ``k_H`` (at the static equilibrium) the series
+    stiffness is ``k_H k_p / (k_H + k_p)``; the effect adds the difference,
+    ``-(k_H^2 / (k_H + k_p))`` per direction, as a linear force about the static
+    equilibrium (pedestal mass neglected). Signature: the critical speed splits
+    into a horizontal and a vertical one; elliptical orbits, x and y 1x amplitudes
+    peak at different speeds.
+    """
+
+    kx: float = 5e6
+    ky: float = 2e7
+    name = "anisotropy"
+    bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log")}
+    signature = "split critical speed: x and y 1x peaks at different speeds, elliptic orbits"
+
+    def force_kernel(self, context):
+        vals = []
+        for (ix, iy), KH in zip(((0, 1), (10, 11)), context.bearing_stiffness, strict=True):
+            kh = np.diag(KH)
+            dk = [kh[0] ** 2 / (kh[0] + self.kx), kh[1] ** 2 / (kh[1] + self.ky)]
+            vals += [ix, iy, dk[0], dk[1], context.q_static[ix], context.q_static[iy]]
+        return _support_kernel, np.array(vals, dtype=float)
 
 
 def compose_force_kernels(kernels):
@@ -151,10 +340,16 @@ def _chain(funcs, sizes):
 # ----------------------------------------------------------------- parameters
 @dataclass(repr=False)
 class ClearanceChange(Effect):
-    """Bearing radial clearance changed to ``clearance`` (m), e.g. by wear."""
+    """Bearing radial clearance changed to ``clearance`` (m), e.g. by wear.
+
+    Signature: softer, more nonlinear bearings: stronger 2x and ball-pass
+    components at the journals, a slightly lower response peak.
+    """
 
     clearance: float = 5e-6
     name = "clearance"
+    bounds = {"clearance": (5e-7, 5e-5, "log")}
+    signature = "2x and ball-pass (3.08x) growth at the journals; response peak shift"
 
     def modify_parameters(self, params):
         return params.replace(clearance=self.clearance)
@@ -163,12 +358,22 @@ class ClearanceChange(Effect):
 # ---------------------------------------------------------------------- speed
 @dataclass(repr=False)
 class SpeedFluctuation(Effect):
-    """Sinusoidal speed ripple ``omega (1 + a sin(2 pi f t + phase))``."""
+    """Sinusoidal speed ripple ``omega (1 + amplitude sin(2 pi frequency t + phase))``.
+
+    Signature: sidebands around 1x at +-``frequency`` (non-synchronous energy),
+    smeared 1x amplitude.
+    """
 
     amplitude: float = 0.01
     frequency: float = 1.0
     phase: float = 0.0
     name = "speed-fluctuation"
+    bounds = {"amplitude": (0.0, 0.05, "lin"), "frequency": (0.2, 20.0, "log")}
+    signature = "non-synchronous sidebands around 1x; 1x amplitude reduced"
+
+    @classmethod
+    def from_vector(cls, x):
+        return cls(amplitude=float(x[0]), frequency=float(x[1]))
 
     def modify_speed(self, t, omega, rng):
         return omega * (1.0 + self.amplitude * np.sin(2 * np.pi * self.frequency * t + self.phase))
@@ -179,15 +384,22 @@ class SpeedFluctuation(Effect):
 class ProbeRunout(Effect):
     """Slow-roll runout: a 1x vector fixed to the shaft, the same at every speed.
 
-    Adds ``A cos(phi + phase)`` to x channels and ``A sin(phi + phase)`` to y
-    channels of the probes at ``planes`` (mechanical and electrical runout of the
-    probe track). ``phi`` is the shaft angle, so it needs the ``phi`` column.
+    Adds ``amplitude cos(phi + phase)`` to x channels and ``amplitude sin(phi +
+    phase)`` to y channels of the probes at ``planes`` (mechanical and electrical
+    runout of the probe track). Signature: a 1x vector of constant amplitude and
+    phase (in the rotating frame), dominant at low speed where the response is small.
     """
 
     amplitude: float = 10e-6
     phase: float = 0.0
-    planes: tuple = ("O1",)
+    planes: tuple = ("O1", "A", "O2", "B")
     name = "runout"
+    bounds = {"amplitude": (0.0, 1e-4, "lin"), "phase": (-math.pi, math.pi, "lin")}
+    signature = "a constant 1x vector, dominant at low speed"
+
+    @classmethod
+    def from_vector(cls, x):
+        return cls(amplitude=float(x[0]), phase=float(x[1]))
 
     def measure(self, table, rng):
         phi = table["phi"].to_numpy()
@@ -201,10 +413,16 @@ class ProbeRunout(Effect):
 
 @dataclass(repr=False)
 class MeasurementNoise(Effect):
-    """White Gaussian noise on every displacement channel at a signal-to-noise ratio (dB)."""
+    """White Gaussian noise on every displacement channel at a signal-to-noise ratio (dB).
+
+    The ratio is of each channel's AC power to the noise power. Signature: a flat
+    non-synchronous floor; no structured order gap.
+    """
 
     snr_db: float = 30.0
     name = "noise"
+    bounds = {"snr_db": (0.0, 60.0, "lin")}
+    signature = "broadband non-synchronous floor"
 
     def measure(self, table, rng):
         for col in DOF_NAMES:
@@ -214,3 +432,9 @@ class MeasurementNoise(Effect):
                 sigma = math.sqrt(np.mean(ac**2) / 10 ** (self.snr_db / 10.0))
                 table[col] = x + sigma * rng.standard_normal(x.shape)
         return table
+
+
+#: Canonical name -> effect class.
+EFFECTS = {cls.name: cls for cls in (Rub, Misalignment, BreathingCrack, JointLooseness,
+                                     ClearanceChange, SupportAnisotropy, ProbeRunout,
+                                     MeasurementNoise, SpeedFluctuation)}

@@ -55,6 +55,9 @@ class RotorParameters:
         Disk eccentricity, m (0.6e-3).
     beta : float
         Eccentric phase of disk O2 relative to O1, rad (pi/4).
+    unbalance_phase : float
+        Angle of disk O1's eccentricity at the once-per-revolution reference, rad
+        (0: the paper's convention; a rig's is unknown and calibrated).
     kB : float
         Hertzian contact stiffness of a ball, N/m^1.5 (13.34e9; the paper prints
         13.34e6, a misprint: see docs).
@@ -95,6 +98,7 @@ class RotorParameters:
     c_O2: float = 3000.0
     e: float = 0.6e-3
     beta: float = math.pi / 4
+    unbalance_phase: float = 0.0
     kB: float = 13.34e9
     clearance: float = 0.5e-6
     n_balls: int = 8
@@ -123,8 +127,9 @@ class RotorParameters:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 problems.append(f"{name}={v!r} must be finite and >= 0")
-        if not math.isfinite(self.beta):
-            problems.append(f"beta={self.beta!r} must be finite (rad)")
+        for name in ("beta", "unbalance_phase"):
+            if not math.isfinite(getattr(self, name)):
+                problems.append(f"{name}={getattr(self, name)!r} must be finite (rad)")
         if int(self.n_balls) != self.n_balls or self.n_balls < 3:
             problems.append(f"n_balls={self.n_balls!r} must be an integer >= 3")
         if not problems:

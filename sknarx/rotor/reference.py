@@ -33,17 +33,17 @@ def numpy_rhs(sim, omega: float):
 
     def rhs(t, z):
         q, v = z[:12], z[12:]
-        phi = omega * t
+        phi = omega * t + p.unbalance_phase
         f = fg.copy()
         w2 = omega * omega
         f[2] += me1 * w2 * np.cos(phi)
         f[3] += me1 * w2 * np.sin(phi)
         f[6] += me2 * w2 * np.cos(phi + p.beta)
         f[7] += me2 * w2 * np.sin(phi + p.beta)
-        f[0], f[1] = f[0] + bearing(q[0], q[1], phi)[0], f[1] + bearing(q[0], q[1], phi)[1]
-        fbx, fby = bearing(q[10], q[11], phi)
-        f[10] += fbx
-        f[11] += fby
+        for ix, iy in ((0, 1), (10, 11)):
+            fbx, fby = bearing(q[ix], q[iy], omega * t)
+            f[ix] += fbx
+            f[iy] += fby
         a = minv * (f - D @ v - K @ q)
         return np.concatenate([v, a])
 

@@ -127,12 +127,15 @@ class RotorBearingSimulator:
     def _setup(self) -> _Setup:
         p, m = self.effective_params, self.matrices
         q_static = self._static()
-        unb = np.array([[p.m_O1 * p.e, 0.0, DOF_INDEX["xO1"], DOF_INDEX["yO1"]],
-                        [p.m_O2 * p.e, p.beta, DOF_INDEX["xO2"], DOF_INDEX["yO2"]]])
+        ph = p.unbalance_phase
+        unb = np.array([[p.m_O1 * p.e, ph, DOF_INDEX["xO1"], DOF_INDEX["yO1"]],
+                        [p.m_O2 * p.e, p.beta + ph, DOF_INDEX["xO2"], DOF_INDEX["yO2"]]])
         brg = np.array([p.kB, p.clearance, p.hertz_exponent, p.n_balls, p.cage_ratio,
                         DOF_INDEX["xA"], DOF_INDEX["yA"], DOF_INDEX["xB"], DOF_INDEX["yB"]],
                        dtype=float)
-        ctx = EffectContext(q_static=q_static)
+        ctx = EffectContext(q_static=q_static, params=p, bearing_stiffness=(
+            bearing_stiffness(q_static[0], q_static[1], p),
+            bearing_stiffness(q_static[10], q_static[11], p)))
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
@@ -146,7 +149,8 @@ class RotorBearingSimulator:
         for ix, iy in ((0, 1), (10, 11)):
             K[np.ix_([ix, iy], [ix, iy])] += bearing_stiffness(q[ix], q[iy], p)
         unb = np.zeros(12, dtype=complex)
-        for name, mass, ph in (("O1", p.m_O1, 0.0), ("O2", p.m_O2, p.beta)):
+        for name, mass, ph in (("O1", p.m_O1, p.unbalance_phase),
+                               ("O2", p.m_O2, p.beta + p.unbalance_phase)):
             unb[DOF_INDEX["x" + name]] = mass * p.e * np.exp(1j * ph)
             unb[DOF_INDEX["y" + name]] = -1j * mass * p.e * np.exp(1j * ph)
         return LinearRotorModel(M=m.M, C=m.C, G=m.G, K=K, unbalance=unb)

@@ -1,0 +1,287 @@
+"""Which unmodelled effect causes the sim-to-real gap, and how far adding it shrinks it.
+
+Procedure (all on order-domain features, see :mod:`sknarx.gap.features`):
+
+1. Split the speed steps into training (every other step) and held-out steps.
+2. Calibrate the nominal model's nuisance parameters (unbalance, stiffness and
+   damping scales) on the training steps; the remaining held-out gap is the gap
+   *before*. If it is within the noise floor, the verdict is ``no-gap``.
+3. Calibrate every candidate effect (with the nuisances) on the training steps and
+   measure the held-out gap *after*; rank by the after-gap plus a penalty of two
+   per effect parameter (an AIC on the chi-square scale).
+4. If the best single effect leaves a significant gap, try pairs of the leading
+   candidates.
+5. The verdict is the best single effect or pair if it removes at least
+   ``min_shrink`` of the held-out gap, else ``unexplained``.
+
+Thresholds are fixed on pilot trials of ``benchmarks/bench_gap_blind.py`` and
+then frozen (see ``DiagnosisSettings``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import asdict, dataclass
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+from joblib import Parallel, delayed
+
+from ..rotor import EFFECTS, RotorParameters
+from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
+from .features import order_features
+from .gapmap import gap_statistic, regions
+
+__all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
+
+#: Candidate effects searched by default (measurement noise is characterised, not
+#: searched: every measurement has some).
+LIBRARY = ("rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "runout",
+           "speed-fluctuation")
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """Frozen thresholds and search effort (fixed on pilot seeds, see the benchmark)."""
+
+    no_gap_per_feature: float = 1.5  # mean held-out excess per feature below which: no-gap
+    min_shrink: float = 0.5  # a verdict must remove at least this share of the gap
+    pair_gain: float = 0.15  # a pair must add at least this much shrink over the best single
+    pair_trigger: float = 0.9  # try pairs when the best single shrinks less than this
+    n_pair_candidates: int = 3
+    max_nfev: int = 15
+    transient_s: float = 0.5
+    n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
+    n_bootstrap: int = 200
+    seed: int = 0
+
+
+def _per_feature(cmp):
+    return gap_statistic(cmp) / max(len(cmp), 1)
+
+
+def _shrink(before, after):
+    return float(1.0 - after / before) if before > 0 else 0.0
+
+
+def _bootstrap_shrink(cmp_before, cmp_after, n, seed):
+    """5-95 % band of the shrink, resampling held-out speed steps."""
+    rng = np.random.default_rng(seed)
+    b = cmp_before.groupby("speed")["excess"].sum()
+    a = cmp_after.groupby("speed")["excess"].sum().reindex(b.index).fillna(0.0)
+    speeds = b.index.to_numpy()
+    vals = []
+    for _ in range(n):
+        pick = rng.choice(len(speeds), len(speeds), replace=True)
+        sb, sa = b.to_numpy()[pick].sum(), a.to_numpy()[pick].sum()
+        vals.append(_shrink(sb, sa))
+    return [float(np.percentile(vals, 5)), float(np.percentile(vals, 95))]
+
+
+def _evidence(cmp_before, cmp_after, k=3):
+    """The features whose gap the candidate removed most (signature evidence)."""
+    key = ["channel", "feature", "window"]
+    b = cmp_before.groupby(key)["excess"].sum()
+    a = cmp_after.groupby(key)["excess"].sum().reindex(b.index).fillna(0.0)
+    gain = (b - a).sort_values(ascending=False)
+    total = b.sum()
+    out = []
+    for (ch, feat, win), g in gain.head(k).items():
+        if g <= 0:
+            break
+        out.append(f"{feat} at {ch} ({win}): {100 * g / total:.0f} % of the gap removed")
+    return out
+
+
+def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
+             candidates=LIBRARY, settings: DiagnosisSettings | None = None,
+             progress=None, exhaustive: bool = False) -> dict:
+    """Diagnose a stepped-speed measurement against the nominal simulator.
+
+    Parameters
+    ----------
+    measured : DataFrame
+        Long table: ``speed`` (rad/s), ``t`` (s, 0 at each step's once-per-revolution
+        reference) and one column per measured channel named after a DOF (m).
+        See :func:`sknarx.gap.load_measured`.
+    base : RotorParameters, optional
+        Nominal rotor (the paper's by default).
+    candidates : sequence of str
+        Canonical effect names to search.
+
+    Returns
+    -------
+    dict
+        ``verdict``, ``ranking``, ``where``, ``shrink`` and the details (see
+        ``docs/gap.md``); ``_tables`` holds the comparison tables for reports.
+    """
+    from .measured import check_measured
+
+    settings = settings or DiagnosisSettings()
+    tick = progress or (lambda msg: None)
+    measured, info = check_measured(measured, channels)
+    channels = info["channels"]
+    base = base or RotorParameters()
+    model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
+                       channels=tuple(channels), transient_s=settings.transient_s)
+    speeds = np.array(info["speeds"])
+    train, held = speeds[0::2], speeds[1::2]
+    meas = order_features(measured, channels, settings.transient_s)
+    tick("measured order features")
+
+    # the nuisance-only model: start its unbalance phase from the 1x phase difference
+    nominal = model.features(train, np.array([v[3] for v in NUISANCE.values()]))
+    m1 = meas[(meas.feature == "1x") & meas.speed.isin(train)]
+    s1 = nominal.set_index(["speed", "window", "channel", "feature"]).reindex(
+        pd.MultiIndex.from_frame(m1[["speed", "window", "channel", "feature"]]))
+    dphi = float(np.angle(np.sum((m1.re.to_numpy() + 1j * m1.im.to_numpy())
+                                 * np.conj(s1.re.to_numpy() + 1j * s1.im.to_numpy()))))
+    start = np.array([1.0, dphi, 1.0, 1.0])
+    cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev)
+    E0, cmp0 = heldout_gap(model, meas, held, cal0, ())
+    _, cmp_all = heldout_gap(model, meas, speeds, cal0, ())
+    tick("nuisance calibration")
+    e0 = E0 / max(len(cmp0), 1)
+    n_features = max(len(cmp0), 1)
+    result = {
+        "verdict": None, "ranking": [], "where": regions(cmp_all),
+        "shrink": 0.0,
+        "gap_before": {"heldout_excess": E0, "per_feature": e0,
+                       "rms_gap_m": float(np.sqrt(np.mean(cmp0["gap"] ** 2)))},
+        "nuisance": {"calibrated": cal0.nuisance, "std": cal0.std},
+        "noise": _noise_summary(meas),
+        "split": {"train_speeds": train.tolist(), "heldout_speeds": held.tolist()},
+        "channels": list(channels),
+        "settings": asdict(settings),
+    }
+    tables = {"before": cmp0, "all": cmp_all}
+    if e0 <= settings.no_gap_per_feature and not exhaustive:
+        result["verdict"] = "no-gap"
+        result["_tables"] = tables
+        return result
+
+    nuis_start = cal0.x
+
+    def run(names):
+        classes = [EFFECTS[n] for n in names]
+        starts = [nuis_start] + _effect_starts(nuis_start, classes)
+        cal = calibrate(model, meas, train, classes, starts=starts, max_nfev=settings.max_nfev)
+        E, cmp = heldout_gap(model, meas, held, cal, classes)
+        return names, cal, E, cmp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        singles = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
+            delayed(run)((c,)) for c in candidates)
+    tick("single candidates")
+    ranked = _rank(singles, E0, cmp0)
+    best = ranked[0] if ranked else None
+    pairs = []
+    if best is not None and best["_shrink"] < settings.pair_trigger:
+        lead = [r["_names"][0] for r in ranked[: settings.n_pair_candidates]]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            pairs = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
+                delayed(run)(p) for p in combinations(lead, 2))
+        tick("pairs")
+    ranked_all = _rank(singles + pairs, E0, cmp0)
+    choice = decide(e0, ranked_all, settings)
+    if choice == "no-gap":
+        result["verdict"] = "no-gap"
+    elif choice is not None:
+        names = choice["_names"]
+        result["verdict"] = names[0] if len(names) == 1 else list(names)
+        result["shrink"] = choice["_shrink"]
+        result["shrink_band"] = _bootstrap_shrink(cmp0, choice["_cmp"], settings.n_bootstrap,
+                                                  settings.seed)
+        result["gap_after"] = {"heldout_excess": choice["_E"],
+                               "rms_gap_m": float(np.sqrt(np.mean(choice["_cmp"]["gap"] ** 2)))}
+        result["regions_after"] = _regions_after(result["where"], choice["_cmp"], cmp0)
+        tables["after"] = choice["_cmp"]
+    else:
+        result["verdict"] = "unexplained"
+        result["shrink"] = max(ranked_all[0]["_shrink"], 0.0) if ranked_all else 0.0
+    result["n_heldout_features"] = n_features
+    result["ranking"] = [{k: v for k, v in r.items() if not k.startswith("_")}
+                         for r in ranked_all]
+    result["_tables"] = tables
+    return result
+
+
+def decide(e0, ranking, settings):
+    """The verdict from the held-out gap per feature and the ranked candidates.
+
+    Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained). Kept
+    separate from the search so thresholds can be fixed on pilot trials and then
+    applied unchanged to fresh ones.
+    """
+    if e0 <= settings.no_gap_per_feature:
+        return "no-gap"
+    singles = [r for r in ranking if len(r["_names"]) == 1]
+    pairs = [r for r in ranking if len(r["_names"]) == 2]
+    if not singles:
+        return None
+    best = min(singles, key=lambda r: r["score"])
+    choice = best
+    if pairs:
+        pb = min(pairs, key=lambda r: r["score"])
+        if pb["_shrink"] >= best["_shrink"] + settings.pair_gain:
+            choice = pb
+    return choice if choice["_shrink"] >= settings.min_shrink else None
+
+
+def _effect_starts(nuis, classes):
+    """A second start with every effect parameter at 60 % of its (log) range."""
+    x = list(nuis)
+    for cls in classes:
+        for a, b, sc in cls.bounds.values():
+            lo, hi = (np.log10(a), np.log10(b)) if sc == "log" else (a, b)
+            x.append(lo + 0.6 * (hi - lo))
+    return [np.array(x)]
+
+
+def _rank(results, E0, cmp0):
+    out = []
+    for names, cal, E, cmp in results:
+        p_eff = cal.n_params - len(NUISANCE)
+        shrink = _shrink(E0, E)
+        out.append({
+            "effect": names[0] if len(names) == 1 else list(names),
+            "params": cal.effect_params if len(names) > 1 else cal.effect_params[0],
+            "params_std": {k: v for k, v in cal.std.items() if not k.startswith("nuisance")},
+            "nuisance": cal.nuisance,
+            "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink,
+            "score": E + 2.0 * p_eff,
+            "evidence": _evidence(cmp0, cmp),
+            "signature": [EFFECTS[n].signature for n in names],
+            "_names": names, "_shrink": shrink, "_E": E, "_cmp": cmp,
+        })
+    out.sort(key=lambda r: r["score"])
+    return out
+
+
+def _regions_after(where, cmp_after, cmp_before):
+    out = []
+    def select(c, r):
+        lo, hi = r["speed_range"]
+        return c[(c.channel == r["channel"]) & (c.feature == r["order"])
+                 & (c.window == r["window"]) & (c.speed >= lo) & (c.speed <= hi)]
+
+    for r in where:
+        b = select(cmp_before, r)["excess"].sum()
+        a = select(cmp_after, r)["excess"].sum()
+        out.append({**r, "heldout_excess_before": float(b), "heldout_excess_after": float(a)})
+    return out
+
+
+def _noise_summary(meas):
+    """Noise characterised from the data (measurement noise is never a verdict)."""
+    nons = meas[meas.feature == "nonsync"]
+    one = meas[meas.feature == "1x"]
+    amp = np.hypot(one.re, one.im)
+    return {"median_1x_standard_error_m": float(np.median(one.se)),
+            "median_1x_to_standard_error_db": float(
+                20 * np.log10(np.median(amp) / max(np.median(one.se), 1e-30))),
+            "median_white_floor_m": float(np.median(nons.se)),
+            "median_line_energy_m": float(np.median(nons.re))}

@@ -1,0 +1,83 @@
+"""Measured stepped-speed data: the documented file format, loading and checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..rotor.parameters import DOF_NAMES
+
+__all__ = ["load_measured", "check_measured"]
+
+TRANSLATIONAL = tuple(n for n in DOF_NAMES if not n.startswith("t"))
+
+
+def load_measured(path) -> pd.DataFrame:
+    """Read a measured long table from CSV or parquet (see ``docs/gap.md``)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"No measured data at {path}.")
+    if path.suffix == ".csv":
+        df = pd.read_csv(path)
+    elif path.suffix == ".parquet":
+        df = pd.read_parquet(path)
+    else:
+        raise ValueError(f"Measured data must be .csv or .parquet, got {path.suffix!r}.")
+    return df
+
+
+def check_measured(df: pd.DataFrame, channels=None):
+    """Validate the table; returns it (sorted) and what the diagnosis needs to know."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError("measured data must be a pandas DataFrame (long format).")
+    missing = [c for c in ("speed", "t") if c not in df.columns]
+    if missing:
+        raise ValueError(
+            f"Measured data lack column(s) {missing}. Expected: 'speed' (rad/s), 't' (s, 0 at "
+            "the once-per-revolution reference of each speed step) and one column per "
+            f"channel named after a DOF ({', '.join(TRANSLATIONAL)}), in metres."
+        )
+    found = [c for c in df.columns if c in TRANSLATIONAL]
+    if channels is None:
+        channels = found
+    unknown = [c for c in channels if c not in TRANSLATIONAL]
+    if unknown:
+        raise ValueError(f"Unknown channel(s) {unknown}; channels are named after DOFs: "
+                         f"{', '.join(TRANSLATIONAL)}.")
+    absent = [c for c in channels if c not in df.columns]
+    if absent or not channels:
+        raise ValueError(f"No measured channel column found (looked for {absent or 'any of '}"
+                         f"{'' if absent else ', '.join(TRANSLATIONAL)}).")
+    cols = ["speed", "t", *channels]
+    bad = [c for c in cols if not np.all(np.isfinite(pd.to_numeric(df[c], errors="coerce")))]
+    if bad:
+        raise ValueError(f"Column(s) {bad} contain NaN, inf or non-numbers; clean them first.")
+    df = df[cols].astype(float).sort_values(["speed", "t"], kind="stable").reset_index(drop=True)
+    if (df["speed"] <= 0).any():
+        raise ValueError("Speeds must be positive (rad/s); stepped-speed records only.")
+    amp = df[list(channels)].abs().max().max()
+    if amp > 0.05:
+        raise ValueError(f"A displacement of {amp:g} m is implausible: are the channels in "
+                         "metres (not um or mils)?")
+    speeds = np.unique(df["speed"])
+    if speeds.size < 4:
+        raise ValueError(f"{speeds.size} speed step(s): at least 4 are needed (half to calibrate, "
+                         "half held out).")
+    sizes, rates = [], []
+    for w, g in df.groupby("speed"):
+        dt = np.diff(g["t"].to_numpy())
+        if dt.size < 64 or np.any(dt <= 0):
+            raise ValueError(f"Speed step {w:g} rad/s: needs at least 65 samples with strictly "
+                             "increasing t.")
+        if np.ptp(dt) > 1e-6 * np.mean(dt):
+            raise ValueError(f"Speed step {w:g} rad/s is not uniformly sampled; resample it.")
+        sizes.append(len(g))
+        rates.append(1.0 / np.mean(dt))
+    if np.ptp(rates) > 1e-6 * np.mean(rates):
+        raise ValueError("All speed steps must share one sampling rate.")
+    n = int(min(sizes))
+    df = df.groupby("speed", group_keys=False).head(n).reset_index(drop=True)
+    return df, {"channels": list(channels), "speeds": speeds.tolist(), "fs": float(rates[0]),
+                "n_samples": n}
