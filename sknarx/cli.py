@@ -60,6 +60,68 @@ def _paper(args) -> int:
     return 0
 
 
+def _gap(args) -> int:
+    from .gap import diagnose, load_measured
+    from .gap.report import write_gap_outputs
+    from .rotor.config import load_config, paper_rotor_from_config
+
+    cfg = load_config(args.rotor) if args.rotor else {}
+    model = cfg.get("rotor", {}).get("model", "paper")
+    command = "sknarx " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    if model != "paper" or _is_order_domain(args.measured):
+        from .gap.orderdomain import diagnose_order_domain
+
+        doc = diagnose_order_domain(args.measured, cfg, args.out, command,
+                                    quiet=args.quiet)
+    else:
+        from .gap.narx_view import narx_view
+
+        base = paper_rotor_from_config(cfg)
+        measured = load_measured(args.measured)
+
+        def progress(msg):
+            if not args.quiet:
+                print(f"[{time.perf_counter() - start:6.1f} s] {msg}", flush=True)
+
+        start = time.perf_counter()
+        kw = {"candidates": tuple(args.candidates)} if args.candidates else {}
+        result = diagnose(measured, base=base, channels=args.channels, progress=progress, **kw)
+        narx = None
+        if not args.no_narx:
+            from .gap.calibration import SweepModel
+
+            info = result["split"]
+            ch = result["channels"][0]
+            sm = SweepModel(base=base, fs=1.0 / float(measured["t"].diff().median()),
+                            n_samples=int(measured.groupby("speed").size().min()),
+                            channels=tuple(result["channels"]))
+            import numpy as np
+            import pandas as pd
+
+            speeds = info["train_speeds"] + info["heldout_speeds"]
+            recs = sm.records(sorted(speeds), np.array(list(result["nuisance"]["calibrated"]
+                                                            .values())))
+            sim_table = pd.concat([pd.DataFrame({"speed": w, "t": t, ch: Y[:, 0]})
+                                   for w, t, Y in recs], ignore_index=True)
+            narx = narx_view(measured, sim_table, ch, base)
+            progress("NARX view")
+        doc = write_gap_outputs(result, args.out, command, narx)
+    out = Path(args.out)
+    print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %")
+    print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
+    return 0
+
+
+def _is_order_domain(path) -> bool:
+    import pandas as pd
+
+    p = Path(path)
+    if p.suffix != ".csv":
+        return False
+    cols = pd.read_csv(p, nrows=0).columns
+    return "t" not in cols and any(c.startswith("amp_") for c in cols)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(
         prog="sknarx", description="Speed-scheduled NARX models of rotor-bearing systems.")
@@ -71,6 +133,16 @@ def main(argv=None) -> int:
                    help="short records for a fast smoke run (not the paper's settings)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=_paper)
+    g = sub.add_parser("gap", help="diagnose the sim-to-real gap of measured data")
+    g.add_argument("--measured", required=True, help="measured data file (.csv or .parquet)")
+    g.add_argument("--rotor", help="rotor description (.toml, .yaml or .json); default: "
+                   "the paper's rotor")
+    g.add_argument("--out", required=True, help="output directory (created)")
+    g.add_argument("--channels", nargs="+", help="channels to use (default: all DOF columns)")
+    g.add_argument("--candidates", nargs="+", help="effects to search (default: the library)")
+    g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
+    g.add_argument("--quiet", action="store_true")
+    g.set_defaults(func=_gap)
     args = parser.parse_args(argv)
     return args.func(args)
 

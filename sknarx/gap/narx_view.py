@@ -1,0 +1,62 @@
+"""The NARX view of a gap: identify the same model class on measured and simulated data.
+
+Which terms appear only in the measured model, and where the coefficient-versus-
+speed curves of the shared terms part, is supporting evidence: a quadratic term
+appearing in the measured model points to a 2x source, a shifted autoregressive
+curve to a stiffness change, and so on.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..narx import SpeedScheduledNarx
+
+__all__ = ["narx_view"]
+
+
+def _records(table, channel, base):
+    out = []
+    for w, g in table.groupby("speed", sort=True):
+        t = g["t"].to_numpy()
+        u = base.m_O1 * base.e * w**2 * np.cos(w * t)  # the nominal unbalance force, N
+        out.append((w, u, g[channel].to_numpy()))
+    return out
+
+
+def narx_view(measured, simulated, channel, base, ny=2, nu=2, degree=2, max_terms=6) -> dict:
+    """Fit speed-scheduled NARX models to both tables and compare them."""
+    models = {}
+    for name, table in (("measured", measured), ("simulated", simulated)):
+        rec = _records(table, channel, base)
+        speeds = np.array([r[0] for r in rec])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            models[name] = SpeedScheduledNarx(
+                ny=ny, nu=nu, degree=degree, esr=0.0, max_terms=max_terms, prune=False,
+                speed_basis="spline").fit([(r[1], r[2]) for r in rec], speeds)
+    m, s = models["measured"], models["simulated"]
+    grid = np.linspace(*m.speed_range_, 50)
+    common = [t for t in m.selected_terms_ if t in s.selected_terms_]
+    curves = {}
+    for term in common:
+        cm = m.coefficients_at(grid)[:, m.selected_terms_.index(term)]
+        cs = s.coefficients_at(grid)[:, s.selected_terms_.index(term)]
+        scale = max(np.max(np.abs(cs)), 1e-300)
+        curves[term] = float(np.max(np.abs(cm - cs)) / scale)
+    nonlinear = [t for t in m.selected_terms_ if t not in s.selected_terms_ and
+                 ("^" in t or "*" in t)]
+    return {
+        "channel": channel,
+        "terms_measured": m.selected_terms_,
+        "terms_simulated": s.selected_terms_,
+        "only_measured": [t for t in m.selected_terms_ if t not in s.selected_terms_],
+        "only_simulated": [t for t in s.selected_terms_ if t not in m.selected_terms_],
+        "max_relative_coefficient_difference": curves,
+        "reading": ("nonlinear terms only in the measured model ("
+                    + ", ".join(nonlinear) + "): a harmonic source the simulator lacks")
+        if nonlinear else "no nonlinear term is specific to the measured model",
+        "_models": models,
+    }
