@@ -65,27 +65,16 @@ class SweepModel:
             c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
         )
 
-    def __post_init__(self):
-        # one integration step for every evaluation: from the nominal rotor at the top
-        # speed, with a margin for the stiffer variants calibration may try
-        self._substeps = None
-
-    def substeps(self, speeds):
-        if self._substeps is None:
-            sim = RotorBearingSimulator(self.base)
-            self._substeps = sim.substeps(self.fs, float(np.max(speeds)))
-        return self._substeps
-
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
         releases the GIL), which halves an evaluation on two cores."""
         sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
         _ = sim._setup  # build once, before the threads share it
-        sub = self.substeps(speeds)
+        _ = sim._lambda_max_per_speed
 
         def one(w):
-            run = sim.simulate(float(w), fs=self.fs, n_samples=self.n_samples, settle=0.0,
-                               substeps=sub)
+            # automatic step: halved if an effect's stiff contact makes it unstable
+            run = sim.simulate(float(w), fs=self.fs, n_samples=self.n_samples, settle=0.0)
             return float(w), run["t"].to_numpy(), run[list(self.channels)].to_numpy()
 
         return list(_pool().map(one, speeds))

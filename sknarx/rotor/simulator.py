@@ -189,10 +189,22 @@ class RotorBearingSimulator:
         return speeds
 
     def _run(self, omega_grid, n_settle, fs, speed_label, substeps=None):
+        """Integrate; an automatically chosen step that proves unstable (stiff contact
+        in an effect, say) is halved up to three times before giving up."""
+        if substeps is not None:
+            return self._run_once(omega_grid, n_settle, fs, speed_label, int(substeps))
+        substeps = self.substeps(fs, float(np.max(omega_grid)))
+        for attempt in range(4):
+            try:
+                return self._run_once(omega_grid, n_settle, fs, speed_label, substeps)
+            except SimulationDivergenceError:
+                if attempt == 3:
+                    raise
+                substeps *= 2
+
+    def _run_once(self, omega_grid, n_settle, fs, speed_label, substeps):
         s = self._setup
         dt = 1.0 / fs
-        if substeps is None:
-            substeps = self.substeps(fs, float(np.max(omega_grid)))
         # shaft angle 0 at the first recorded sample (t = 0)
         w = omega_grid
         phi0 = -float(np.sum(0.5 * (w[1 : n_settle + 1] + w[:n_settle])) * dt)
@@ -356,12 +368,10 @@ class RotorBearingSimulator:
             store = SweepStore(path)
             store.open(settings)
             todo = [w for w in speeds if not store.done(w)]
-        substeps = self.substeps(fs, float(np.max(speeds))) if len(speeds) else 1
         _ = self._setup  # compute once, before workers share the simulator
 
         def one(w):
-            table = self.simulate(w, fs=fs, n_samples=n_samples, settle=settle,
-                                  substeps=substeps)
+            table = self.simulate(w, fs=fs, n_samples=n_samples, settle=settle)
             if store is not None:
                 store.write(w, table)
             return w, table
