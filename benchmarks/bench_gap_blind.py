@@ -8,8 +8,8 @@ Each trial draws an effect (none, one of the library, a pair, or one outside the
 library: a 50 Hz electrical line, a thermal bow), its severity and parameters,
 rig-like mismatch of stiffness (+-3 %), damping (+-5 %) and unbalance (+-5 %, any
 phase), noise (SNR 20-40 dB) and keyphasor jitter (+-2 deg per step), and simulates
-a 10-step sweep (1 s per step at 1 kHz). The diagnosis runs exhaustively (every candidate, pairs when
-needed); the verdict thresholds are fitted on PILOT seeds only and then frozen
+a 10-step sweep (1 s per step at 1 kHz). The diagnosis runs exhaustively (every
+candidate, pairs when needed); the verdict thresholds are fitted on PILOT seeds only and then frozen
 and applied to fresh EVALUATION seeds.
 """
 

@@ -15,7 +15,8 @@ measured, truth = make_trial("runout", seed=3, speeds=speeds, n_samples=1000)
 print(measured.head())
 
 result = diagnose(measured, candidates=("runout", "crack", "anisotropy"))
-print("verdict:", result["verdict"], f"- {100 * result['shrink']:.0f} % of the held-out gap removed")
+print("verdict:", result["verdict"],
+      f"- {100 * result['shrink']:.0f} % of the held-out gap removed")
 for r in result["ranking"]:
     print(f"  {str(r['effect']):28s} shrink {r['shrink']:6.2f}  params {r['params']}")
 print("where:", result["where"][:2])
