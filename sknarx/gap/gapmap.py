@@ -67,8 +67,6 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     out["gap"] = diff
     out["z2"] = z2
     out["excess"] = np.clip(z2 - expect, 0.0, None)
-    out["_res_re"] = (Mc - Sc).real / np.sqrt(var)
-    out["_res_im"] = (Mc - Sc).imag / np.sqrt(var)
     return out
 
 
@@ -90,11 +88,6 @@ def fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, rtol=0.01,
 def gap_statistic(cmp: pd.DataFrame) -> float:
     """Total excess gap (dimensionless, 0 when the two agree within noise)."""
     return float(cmp["excess"].sum())
-
-
-def residual_vector(cmp: pd.DataFrame) -> np.ndarray:
-    """Normalised residuals for least squares (real and imaginary parts)."""
-    return np.concatenate([cmp["_res_re"].to_numpy(), cmp["_res_im"].to_numpy()])
 
 
 def regions(cmp: pd.DataFrame, z_threshold: float = 9.0) -> list[dict]:

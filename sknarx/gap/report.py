@@ -8,23 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import json_safe
 from ..plotting import plt, save, to_data_uri
 
 FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", "nonsync"]
-
-
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items() if not str(k).startswith("_")}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else str(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    return x
 
 
 def heatmap(cmp, path, title):
@@ -77,11 +64,11 @@ def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None)
         ax.barh(names[::-1], [max(r["shrink"], 0) for r in result["ranking"]][::-1])
         ax.set(xlabel="share of the held-out gap removed", xlim=(0, 1))
         figs["ranking"] = save(fig, out / "ranking.png")
-    doc = _clean({k: v for k, v in result.items() if not k.startswith("_")})
+    doc = json_safe({k: v for k, v in result.items() if not k.startswith("_")})
     doc["sknarx_version"] = __version__
     doc["command"] = command
     if narx is not None:
-        doc["narx"] = _clean(narx)
+        doc["narx"] = json_safe(narx)
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1))
     (out / "report.html").write_text(_html(doc, figs))
     return doc

@@ -4,33 +4,18 @@ from __future__ import annotations
 
 import html
 import json
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..io import json_safe
 from ..plotting import to_data_uri
 from .figures import MODEL_STYLE, make_figures
 
 RECOMMENDED = "improved-spline"
 LIMITS = {"nrmse": 0.05, "amp1x_rel_error": 0.02}
-
-
-def _clean(x):
-    """JSON-safe floats (inf/NaN become strings a reader can see)."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(x) else str(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    return x
 
 
 def table3(model) -> pd.DataFrame:
@@ -91,7 +76,7 @@ def metrics(st, command: str) -> dict:
                      "thresholds": {"esr_percent": c.esr, "max_terms": c.max_terms},
                      "seeds": [c.seed]},
     }
-    return _clean(out)
+    return json_safe(out)
 
 
 def write_outputs(st, out, command: str) -> dict:

@@ -122,21 +122,6 @@ class BeamRotor:
             C[i + 2, i + 2] += b.cyy
         return M, C, G, K
 
-    def unbalance_response(self, speeds, disk_index: int, probe: float, direction="x"):
-        """Complex 0-peak response (m) at ``probe`` to a unit unbalance (1 kg m) at a disk."""
-        M, C, G, K = self.matrices()
-        i = 4 * self.node(self.disks[disk_index].position)
-        j = 4 * self.node(probe) + (0 if direction == "x" else 2)
-        F = np.zeros(M.shape[0], dtype=complex)
-        out = np.empty(len(speeds), dtype=complex)
-        for k, w in enumerate(np.asarray(speeds, dtype=float)):
-            F[:] = 0
-            F[i] = w * w
-            F[i + 2] = -1j * w * w  # forward rotating: y lags x by 90 degrees
-            D = K - w * w * M + 1j * w * (C + w * G)
-            out[k] = sla.solve(D, F, check_finite=False)[j]
-        return out
-
     def probe_responses(self, speeds, probe: float, n_modes: int | None = 24) -> np.ndarray:
         """Complex x and y response (m) at ``probe`` to a unit unbalance at each disk.
 
