@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 from joblib import Parallel, delayed
 
-from ..rotor import EFFECTS, RotorParameters
+from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
 from .features import order_features
 from .gapmap import gap_statistic, regions
@@ -167,7 +167,11 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         classes = [EFFECTS[n] for n in names]
         starts = [nuis_start] + _effect_starts(nuis_start, classes)
         cal = calibrate(model, meas, train, classes, starts=starts, max_nfev=settings.max_nfev)
-        E, cmp = heldout_gap(model, meas, held, cal, classes)
+        try:
+            E, cmp = heldout_gap(model, meas, held, cal, classes)
+        except SimulationDivergenceError:
+            # calibrated on the training speeds, unstable at a held-out one: rejected
+            E, cmp = float("inf"), None
         return names, cal, E, cmp
 
     with warnings.catch_warnings():
@@ -253,7 +257,8 @@ def _rank(results, E0, cmp0):
             "nuisance": cal.nuisance,
             "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink,
             "score": E + 2.0 * p_eff,
-            "evidence": _evidence(cmp0, cmp),
+            "evidence": _evidence(cmp0, cmp) if cmp is not None else
+            ["the calibrated model diverges at a held-out speed"],
             "signature": [EFFECTS[n].signature for n in names],
             "_names": names, "_shrink": shrink, "_E": E, "_cmp": cmp,
         })
