@@ -29,7 +29,15 @@ def timeit(fn, repeat=5):
 def machine():
     from threadpoolctl import threadpool_info
 
+    import subprocess
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent).stdout.strip()
+    except OSError:  # pragma: no cover
+        commit = ""
     return {
+        "git_commit": commit,
         "python": platform.python_version(),
         "cpu_count": os.cpu_count(),
         "blas": [{k: i.get(k) for k in ("internal_api", "num_threads", "version")}

@@ -48,7 +48,10 @@ def plan(n, seed0):
 
 
 def run_trial(kind, seed, settings):
-    measured, truth = make_trial(kind, seed)
+    try:
+        measured, truth = make_trial(kind, seed)
+    except RuntimeError as exc:  # every draw was physically unstable (e.g. joint resonance)
+        return {"kind": kind, "seed": seed, "skipped": str(exc)}
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -126,11 +129,15 @@ def run(n, seed0, log, settings):
     recs = []
     for kind, seed in plan(n, seed0):
         if seed in done:
-            recs.append(done[seed])
+            if "skipped" not in done[seed]:
+                recs.append(done[seed])
             continue
         r = run_trial(kind, seed, settings)
         with log.open("a") as f:
             f.write(json.dumps(r, default=float) + "\n")
+        if "skipped" in r:
+            print(f"  seed {seed} {kind}: skipped ({r['skipped']})", flush=True)
+            continue
         recs.append(r)
         print(f"  seed {seed} {str(r['kind']):28s} e0 {r['e0']:9.2f} "
               f"best {r['ranking'][0]['effect'] if r['ranking'] else '-'} "
