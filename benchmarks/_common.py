@@ -27,9 +27,9 @@ def timeit(fn, repeat=5):
 
 
 def machine():
-    from threadpoolctl import threadpool_info
-
     import subprocess
+
+    from threadpoolctl import threadpool_info
 
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
