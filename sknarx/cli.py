@@ -74,7 +74,7 @@ def _gap(args) -> int:
         doc = diagnose_order_domain(args.measured, cfg, args.out, command,
                                     quiet=args.quiet)
     else:
-        from .gap.narx_view import narx_view
+        from .gap.narx_view import narx_view_of
 
         base = paper_rotor_from_config(cfg)
         measured = load_measured(args.measured)
@@ -88,22 +88,7 @@ def _gap(args) -> int:
         result = diagnose(measured, base=base, channels=args.channels, progress=progress, **kw)
         narx = None
         if not args.no_narx:
-            from .gap.calibration import SweepModel
-
-            info = result["split"]
-            ch = result["channels"][0]
-            sm = SweepModel(base=base, fs=1.0 / float(measured["t"].diff().median()),
-                            n_samples=int(measured.groupby("speed").size().min()),
-                            channels=tuple(result["channels"]))
-            import numpy as np
-            import pandas as pd
-
-            speeds = info["train_speeds"] + info["heldout_speeds"]
-            recs = sm.records(sorted(speeds), np.array(list(result["nuisance"]["calibrated"]
-                                                            .values())))
-            sim_table = pd.concat([pd.DataFrame({"speed": w, "t": t, ch: Y[:, 0]})
-                                   for w, t, Y in recs], ignore_index=True)
-            narx = narx_view(measured, sim_table, ch, base)
+            narx = narx_view_of(result, measured, base)
             progress("NARX view")
         doc = write_gap_outputs(result, args.out, command, narx)
     out = Path(args.out)

@@ -31,7 +31,7 @@ from joblib import Parallel, delayed
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
 from .features import order_features
-from .gapmap import gap_statistic, regions
+from .gapmap import regions
 
 __all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
 
@@ -55,10 +55,6 @@ class DiagnosisSettings:
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
-
-
-def _per_feature(cmp):
-    return gap_statistic(cmp) / max(len(cmp), 1)
 
 
 def _shrink(before, after):
@@ -152,6 +148,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         "nuisance": {"calibrated": cal0.nuisance, "std": cal0.std},
         "noise": _noise_summary(meas),
         "split": {"train_speeds": train.tolist(), "heldout_speeds": held.tolist()},
+        "sampling": {"fs_hz": info["fs"], "samples_per_step": info["n_samples"]},
         "channels": list(channels),
         "settings": asdict(settings),
     }

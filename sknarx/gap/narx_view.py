@@ -14,7 +14,7 @@ import numpy as np
 
 from ..narx import SpeedScheduledNarx
 
-__all__ = ["narx_view"]
+__all__ = ["narx_view", "narx_view_of"]
 
 
 def _records(table, channel, base):
@@ -60,3 +60,22 @@ def narx_view(measured, simulated, channel, base, ny=2, nu=2, degree=2, max_term
         if nonlinear else "no nonlinear term is specific to the measured model",
         "_models": models,
     }
+
+
+def narx_view_of(result: dict, measured, base) -> dict:
+    """The NARX view of a :func:`~sknarx.gap.diagnose` result: measured records against
+    the nominal rotor with the calibrated nuisance parameters, first channel."""
+    import pandas as pd
+
+    from .calibration import SweepModel
+    from .measured import check_measured
+
+    measured, _ = check_measured(measured, result["channels"])
+    ch = result["channels"][0]
+    model = SweepModel(base=base, fs=result["sampling"]["fs_hz"],
+                       n_samples=result["sampling"]["samples_per_step"], channels=(ch,))
+    speeds = sorted(result["split"]["train_speeds"] + result["split"]["heldout_speeds"])
+    nuis = np.array(list(result["nuisance"]["calibrated"].values()))
+    sim = pd.concat([pd.DataFrame({"speed": w, "t": t, ch: Y[:, 0]})
+                     for w, t, Y in model.records(speeds, nuis)], ignore_index=True)
+    return narx_view(measured, sim, ch, base)

@@ -116,8 +116,8 @@ def _solve_linear(B, z, w):
 
 
 class _Candidate:
-    def __init__(self, name, runout, anisotropic):
-        self.name, self.runout, self.anisotropic = name, runout, anisotropic
+    def __init__(self, runout, anisotropic):
+        self.runout, self.anisotropic = runout, anisotropic
 
     @property
     def label(self):
@@ -243,7 +243,7 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
         return coef, s_all, kcs, z2
 
     # the nominal model exactly as described (only the unbalance fitted)
-    nominal = _Candidate("nominal", False, False)
+    nominal = _Candidate(False, False)
     p_nom = np.log10([b0.kxx, b0.cxx])
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
     # calibrating the uncertain nominal values (isotropic bearing stiffness, damping)
@@ -255,8 +255,8 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
 
     ranking = []
     fits = {}
-    for cand in (_Candidate("runout", True, False), _Candidate("anisotropy", False, True),
-                 _Candidate("pair", True, True)):
+    for cand in (_Candidate(True, False), _Candidate(False, True),
+                 _Candidate(True, True)):
         p, sd = _fit(model, cand, bins, train, bounds, start=start)
         coef, s_all, kcs, z2 = evaluate(cand, p)
         E = float(np.clip(z2[held] - 2, 0, None).sum())

@@ -297,8 +297,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             return
         polys = [Polynomial.fit(speeds, coef[:, m], J, domain=[a, b]) for m in range(coef.shape[1])]
         self.coef_poly_ = np.array([np.pad(p.coef, (0, J + 1 - p.coef.size)) for p in polys])
-        raw = np.array([np.pad(p.convert().coef, (0, J + 1 - p.convert().coef.size))
-                        for p in polys])
+        raw_coefs = [p.convert().coef for p in polys]  # powers of omega in rad/s
+        raw = np.array([np.pad(c, (0, J + 1 - c.size)) for c in raw_coefs])
         self.speed_polynomials_ = pd.DataFrame(
             raw, index=names, columns=[f"beta{j}" for j in range(J + 1)]
         )
