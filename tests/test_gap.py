@@ -34,13 +34,29 @@ def test_order_features_recover_amplitude_and_phase():
                                [2e-6, -1.0], rtol=1e-9)
 
 
-def test_line_energy_ignores_white_noise_but_sees_a_line():
+def test_line_energy_ignores_white_noise_but_sees_a_line_in_its_order_band():
     white = order_features(_table(noise=1e-6), ["xO1"])
     line = order_features(_table(noise=1e-6, extra=lambda t: 5e-6 * np.sin(2 * np.pi * 50 * t)),
                           ["xO1"])
-    n_w = white[(white.feature == "nonsync") & (white.window == "steady")].re.iloc[0]
-    n_l = line[(line.feature == "nonsync") & (line.window == "steady")].re.iloc[0]
-    assert n_w < 1e-6 < 3e-6 < n_l
+
+    def bands(f):
+        g = f[f.feature.str.startswith("nonsync") & (f.window == "steady")]
+        return g.set_index("feature").re
+
+    # 50 Hz at 120 rad/s is shaft order 2.62
+    assert bands(white).max() < 1e-6
+    b = bands(line)
+    assert 3e-6 < b["nonsync 2.5-3.5x"] < 7e-6
+    assert b.drop("nonsync 2.5-3.5x").max() < 1e-6
+
+
+def test_a_fixed_frequency_line_walks_across_order_bands():
+    f = pd.concat([_table(w, noise=1e-7, extra=lambda t: 5e-6 * np.sin(2 * np.pi * 50 * t))
+                   for w in (100.0, 250.0)])
+    feats = order_features(f, ["xO1"])
+    g = feats[feats.feature.str.startswith("nonsync") & (feats.window == "steady")]
+    top = g.loc[g.groupby("speed").re.idxmax()].set_index("speed").feature
+    assert top[100.0] == "nonsync 2.5-3.5x" and top[250.0] == "nonsync 0.75-1.5x"
 
 
 def test_small_keyphasor_offsets_are_not_a_gap_but_large_ones_are():

@@ -146,24 +146,31 @@ def _measured_arrays(meas_feats, keys):
     return m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy()
 
 
-_ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0, "nonsync": 0.0}
+_ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nonsync: 0
 
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
-              diff_step=1e-3, n_probe=6, seed=0) -> Calibration:
+              diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None) -> Calibration:
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
-    Each ``starts`` entry (nuisance values, then effect values in search space) seeds
-    one local least-squares run; with effects, ``n_probe`` random effect settings are
-    also scored and the best one seeds another run (the 2x phase of a crack, say, is
-    periodic in its angle: local search alone can stall in the wrong basin).
+    The first ``starts`` entry (nuisance values, then effect values in search space)
+    seeds the local least-squares run. With effects, ``n_probe`` settings of the
+    effect parameters from a scrambled Sobol sequence are scored first and the best
+    ``n_short`` best of them and the start get short local runs, and the best of
+    those is run to convergence: the 2x phase of a crack, say, is periodic in its angle,
+    and the cheapest probe, like local search alone, often sits in the wrong basin.
+    ``probe_from`` (index into the search vector) restricts the probes to the
+    trailing parameters -- a pair warm-started from its leading effect's fit probes
+    only the partner.
     """
+    from scipy.stats import qmc
+
     lo, hi, log, names = _split_x(classes)
     speeds = np.asarray(speeds, dtype=float)
     keys, _, _, nons = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
     Mc, se_m = _measured_arrays(meas_feats, keys)
     speed_idx = np.searchsorted(speeds, np.array([k[0] for k in keys]))
-    order_k = np.array([_ORDER_K[k[3]] for k in keys])
+    order_k = np.array([_ORDER_K.get(k[3], 0.0) for k in keys])
     size = 2 * len(keys)
 
     def residual(x):
@@ -186,25 +193,30 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         return np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
     x0s = [start_vector(s) for s in (starts or [None])]
-    if classes and n_probe:
-        rng = np.random.default_rng(seed)
+    j0 = len(NUISANCE) if probe_from is None else probe_from
+    if classes and n_probe and j0 < len(lo):
         base = x0s[0]
+        j = slice(j0, len(lo))
+        unit = qmc.Sobol(len(lo) - j0, scramble=True, seed=seed).random(n_probe)
         probes = []
-        for _ in range(n_probe):
+        for u in unit:
             x = base.copy()
-            j = slice(len(NUISANCE), len(lo))
-            x[j] = lo[j] + rng.random(len(lo) - len(NUISANCE)) * (hi[j] - lo[j])
+            x[j] = lo[j] + u * (hi[j] - lo[j])
             probes.append((float(np.sum(residual(x) ** 2)), x))
+        probes.append((float(np.sum(residual(base) ** 2)), base))
         probes.sort(key=lambda p: p[0])
-        # one local run, from whichever start is already better
-        start_cost = float(np.sum(residual(x0s[0]) ** 2))
-        x0s = [probes[0][1]] if probes[0][0] < start_cost else x0s[:1]
-    best = None
-    for x0 in x0s:
-        res = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
-                            diff_step=diff_step, max_nfev=max_nfev)
-        if best is None or res.cost < best.cost:
-            best = res
+        x0s = [x for _, x in probes[:n_short]]
+
+    def local(x0, nfev):
+        return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
+                             diff_step=diff_step, max_nfev=nfev)
+
+    if len(x0s) > 1:
+        # the cheapest probe is often in the wrong basin of a periodic parameter: a short
+        # run from each of the leading starts, then the best of them runs to the end
+        short = [local(x0, max(3, max_nfev // 4)) for x0 in x0s]
+        x0s = [min(short, key=lambda r: r.cost).x]
+    best = local(x0s[0], max_nfev)
     nuis, effects = _decode(best.x, classes, log)
     std = _std(best, log, names)
     return Calibration(

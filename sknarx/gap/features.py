@@ -7,7 +7,11 @@ squares with a constant and the shaft orders 1/3x, 1/2x, 1x, 2x, 3x (plus 4x,
 ``V = A e^{i phase}`` (``x ~ A cos(k phi + phase)``) with a standard error from
 the residual; the residual's *line energy* -- power in spectral lines standing
 above its white floor -- measures non-synchronous content (sidebands, electrical
-lines, subharmonics not on the list) while ignoring broadband noise.
+lines, subharmonics not on the list) while ignoring broadband noise. It is kept
+per band of shaft order (``NONSYNC_BANDS``): a fixed-frequency line (mains
+pickup, a natural frequency ringing down) walks across the bands as the speed
+changes, while the ball-passage line of a bearing stays in its band -- one
+scalar of non-synchronous energy cannot tell the two apart.
 """
 
 from __future__ import annotations
@@ -15,25 +19,43 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["ORDERS", "order_features", "ORDER_LABELS"]
+__all__ = ["ORDERS", "order_features", "ORDER_LABELS", "NONSYNC_BANDS", "is_nonsync"]
 
 ORDERS = (1 / 3, 1 / 2, 1.0, 2.0, 3.0)
 ORDER_LABELS = {1 / 3: "1/3x", 1 / 2: "1/2x", 1.0: "1x", 2.0: "2x", 3.0: "3x"}
 _EXTRA = (4.0, 5.0)
+#: edges of the non-synchronous bands, in shaft orders (the last band is open)
+NONSYNC_BANDS = (0.0, 0.75, 1.5, 2.5, 3.5)
+NONSYNC_LABELS = tuple(
+    f"nonsync {a:g}-{b:g}x" for a, b in zip(NONSYNC_BANDS[:-1], NONSYNC_BANDS[1:], strict=True)
+) + (f"nonsync >{NONSYNC_BANDS[-1]:g}x",)
 
 
-def _line_energy(r, fs):
-    """Amplitude of spectral lines above the white floor of a residual (units of r)."""
+def is_nonsync(label) -> bool:
+    """Whether a feature label is a non-synchronous line-energy band."""
+    return str(label).startswith("nonsync")
+
+
+def _line_energy(r, fs, omega):
+    """Amplitude of spectral lines above the white floor of a residual, per order band.
+
+    Returns the line amplitude of each band of ``NONSYNC_BANDS`` (units of ``r``)
+    and the white-floor amplitude of one bin.
+    """
     n = r.size
+    nb = len(NONSYNC_LABELS)
     if n < 16:
-        return 0.0, 0.0
+        return np.zeros(nb), 0.0
     P = np.abs(np.fft.rfft(r * np.hanning(n))) ** 2
     P = P[1:]
+    order = np.arange(1, P.size + 1) * fs / n * 2 * np.pi / max(omega, 1e-12)
     level = np.median(P) / np.log(2.0)  # exponential distribution of white periodogram bins
     thr = level * np.log(P.size / 1e-3)  # ~1e-3 false exceedances per record
-    excess = np.clip(P[P > thr] - level, 0.0, None).sum()
+    excess = np.where(P > thr, np.clip(P - level, 0.0, None), 0.0)
+    band = np.searchsorted(NONSYNC_BANDS, order, side="right") - 1
+    per_band = np.bincount(band, weights=excess, minlength=nb)[:nb]
     scale = 2.0 / (np.hanning(n).sum() ** 2)  # periodogram -> squared amplitude
-    return float(np.sqrt(excess * scale)), float(np.sqrt(level * scale))
+    return np.sqrt(per_band * scale), float(np.sqrt(level * scale))
 
 
 def _window_features(w, t, Y, fs, orders):
@@ -52,7 +74,7 @@ def _window_features(w, t, Y, fs, orders):
     se = np.sqrt((R**2).sum(axis=0) / dof) * np.sqrt(2.0 / n)
     k = len(orders)
     vec = coef[1 : 1 + 2 * k : 2] - 1j * coef[2 : 2 + 2 * k : 2]  # (orders, channels)
-    lines = np.array([_line_energy(R[:, c], fs) for c in range(Y.shape[1])])
+    lines = [_line_energy(R[:, c], fs, w) for c in range(Y.shape[1])]
     return vec, se, lines
 
 
@@ -76,10 +98,12 @@ def feature_arrays(records, channels, transient_s=0.5, orders=ORDERS):
                     keys.append((w, window, ch, lab))
                     vals.append(vec[i, c])
                     ses.append(se[c])
-                keys.append((w, window, ch, "nonsync"))
-                vals.append(lines[c, 0])
-                ses.append(lines[c, 1])
-    nons = np.array([k[3] == "nonsync" for k in keys])
+                amps, floor = lines[c]
+                for lab, a in zip(NONSYNC_LABELS, amps, strict=True):
+                    keys.append((w, window, ch, lab))
+                    vals.append(a)
+                    ses.append(floor)
+    nons = np.array([is_nonsync(k[3]) for k in keys])
     return keys, np.array(vals, dtype=complex), np.array(ses), nons
 
 
@@ -101,7 +125,8 @@ def order_features(table: pd.DataFrame, channels, transient_s: float = 0.5,
     -------
     DataFrame
         One row per (speed, window, channel, feature): ``feature`` is an order
-        label or ``'nonsync'``; ``re``, ``im`` (m; ``im = 0`` for ``nonsync``) and
+        label or a ``'nonsync ...'`` band; ``re``, ``im`` (m; ``im = 0`` for the
+        non-synchronous bands) and
         ``se`` (standard error, m).
     """
     records = [(w, g["t"].to_numpy(), g[list(channels)].to_numpy())

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .features import is_nonsync
+
 __all__ = ["compare", "regions", "gap_statistic"]
 
 _ORDER_K = {"1/3x": 1 / 3, "1/2x": 1 / 2, "1x": 1.0, "2x": 2.0, "3x": 3.0}
@@ -53,7 +55,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     feats = m.index.get_level_values("feature").to_numpy()
     se_m = m["se"].to_numpy()
     se_s = s["se"].to_numpy()
-    nons = feats == "nonsync"
+    nons = np.array([is_nonsync(f) for f in feats], dtype=bool)
     diff = np.abs(Mc - Sc)
     var = se_m**2 + se_s**2 + (rtol * np.abs(Sc)) ** 2
     var = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2

@@ -10,8 +10,9 @@ import numpy as np
 
 from ..io import json_safe
 from ..plotting import plt, save, to_data_uri
+from .features import NONSYNC_LABELS
 
-FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", "nonsync"]
+FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", *NONSYNC_LABELS]
 
 
 def heatmap(cmp, path, title):

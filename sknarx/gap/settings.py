@@ -1,0 +1,32 @@
+"""Thresholds and search effort of the gap diagnosis.
+
+The verdict thresholds are fitted on the pilot trials of
+``benchmarks/bench_gap_blind.py`` and then frozen here; the search-effort fields
+decide what is computed (the benchmark reuses a logged trial only if they match).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["DiagnosisSettings", "SEARCH_FIELDS"]
+
+#: the fields that change what a diagnosis computes (the others only read its results)
+SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "seed")
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """Frozen thresholds and search effort (fixed on pilot seeds, see the benchmark)."""
+
+    no_gap_per_feature: float = 1.5  # mean held-out excess per feature below which: no-gap
+    min_shrink: float = 0.5  # a verdict must remove at least this share of the gap
+    min_log_shrink: float = 0.5  # ... and this share of sum(log(1 + excess))
+    pair_trigger: float = 0.2  # try pairs when the best single leaves this excess per feature
+    pair_gain: float = 0.5  # a pair must remove this share of what the best single leaves
+    n_partners: int = 3  # partners tried with the best single (by the gap they explain)
+    max_nfev: int = 15
+    transient_s: float = 0.5
+    n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
+    n_bootstrap: int = 200
+    seed: int = 0
