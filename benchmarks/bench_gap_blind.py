@@ -1,8 +1,9 @@
 """Blind validation of the gap diagnosis on trials whose effect is withheld.
 
 Run: ``python benchmarks/bench_gap_blind.py [--pilot 32] [--trials 100]``
-(writes ``benchmarks/results/bench_gap_blind.json`` and a per-trial JSONL log that
-lets an interrupted run resume).
+(writes ``benchmarks/results/bench_gap_blind.json`` and per-trial JSONL logs that
+let an interrupted run resume). On two cores, ``--shard 0/2`` and ``--shard 1/2`` in
+two processes, then one run without ``--shard`` to write the report.
 
 Each trial draws an effect (none, one of the library, a pair, or one outside the
 library: a 50 Hz electrical line, a thermal bow), its severity and parameters,
@@ -177,12 +178,19 @@ def fit_thresholds(pilot, base):
     return best
 
 
-def run(n, seed0, log, settings):
+def run(n, seed0, phase, settings, shard=(0, 1)):
+    """Run (or reload) the trials of ``phase``; ``shard = (k, n)`` runs every n-th only.
+
+    Each process appends to its own log; all logs of the phase are read back.
+    """
     commit = git_commit()
     code = diagnosis_code_hash() + str([getattr(settings, f) for f in SEARCH_FIELDS])
+    k, n_shards = shard
+    suffix = f".shard{k}of{n_shards}" if n_shards > 1 else ""
+    log = RESULTS / f"gap_blind_{phase}{suffix}.jsonl"
     done, stale = {}, 0
-    if log.exists():
-        for line in log.read_text().splitlines():
+    for path in sorted(RESULTS.glob(f"gap_blind_{phase}*.jsonl")):
+        for line in path.read_text().splitlines():
             r = json.loads(line)
             # a logged trial is reused only if the diagnosis code has not changed since
             if r.get("diagnosis_code") == code:
@@ -192,10 +200,12 @@ def run(n, seed0, log, settings):
     if stale:
         print(f"  {stale} logged trials from other code ignored", flush=True)
     recs = []
-    for kind, seed in plan(n, seed0):
+    for i, (kind, seed) in enumerate(plan(n, seed0)):
         if seed in done:
             if "skipped" not in done[seed]:
                 recs.append(done[seed])
+            continue
+        if i % n_shards != k:
             continue
         r = run_trial(kind, seed, settings)
         r["commit"], r["diagnosis_code"] = commit, code
@@ -225,16 +235,23 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--pilot", type=int, default=32)
     ap.add_argument("--trials", type=int, default=100)
+    ap.add_argument("--shard", default="0/1",
+                    help="K/N: run every N-th trial from the K-th (parallel processes); "
+                         "run once more without it to write the report")
     args = ap.parse_args()
+    shard = tuple(int(v) for v in args.shard.split("/"))
     RESULTS.mkdir(exist_ok=True)
     # pairs are searched from a low trigger so the fitted trigger can be any value above
     base = replace(DiagnosisSettings(), pair_trigger=0.2)
     print("pilot trials (threshold fitting)")
-    pilot = run(args.pilot, 1000, RESULTS / "gap_blind_pilot.jsonl", base)
+    pilot = run(args.pilot, 1000, "pilot", base, shard)
+    print("evaluation trials (fresh seeds)")
+    ev = run(args.trials, 5000, "eval", base, shard)
+    if shard[1] > 1:
+        print("shard done; run without --shard to write the report")
+        return
     frozen = fit_thresholds(pilot, base)
     print("frozen thresholds:", frozen)
-    print("evaluation trials (fresh seeds)")
-    ev = run(args.trials, 5000, RESULTS / "gap_blind_eval.jsonl", base)
     sc = score(ev, frozen)
     times = [r["seconds"] for r in ev]
     table([[k, f"{v:.3f}" if isinstance(v, float) else v] for k, v in sc.items()] +
