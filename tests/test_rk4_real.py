@@ -27,9 +27,10 @@ def diagnosis(tmp_path_factory):
 
 def test_keys_and_files(diagnosis):
     doc, out = diagnosis
-    for key in ("verdict", "ranking", "where", "shrink", "nominal_calibration", "limits"):
+    for key in ("verdict", "ranking", "where", "shrink", "nominal_calibration", "limits",
+                "located", "gap_by_band", "response_model"):
         assert key in doc
-    for name in ("report.html", "bode.png", "polar.png"):
+    for name in ("report.html", "bode.png", "polar.png", "runup_zoom.png"):
         assert (out / name).exists()
 
 
@@ -44,6 +45,32 @@ def test_runout_found_where_it_acts_and_gap_halved_on_held_out_segments(diagnosi
     assert 2e-6 < runout["params"]["runout_amplitude_m"] < 8e-6
     top = doc["where"][0]
     assert top["rpm_range"][0] < 1200  # the largest gap starts where runout dominates
+
+
+def test_both_known_effects_found_and_located_where_they_act(diagnosis):
+    doc, _ = diagnosis
+    assert sorted(doc["verdict"]) == ["anisotropy", "runout"]
+    assert doc["shrink"] >= 0.5 and doc["shrink_band"][0] > 0.3
+    # runout: where the response is small, at the low-speed end of the run-up
+    assert doc["located"]["runout"]["rpm_range"][0] < 1200
+    # anisotropy: through the critical speed
+    lo, hi = doc["located"]["anisotropy"]["rpm_range"]
+    assert lo < 1650 < hi < 1900
+    pair = doc["ranking"][0]
+    c1, c2 = pair["params"]["critical_speeds_rpm"]
+    assert 1550 < c1 < c2 < 1750
+
+
+def test_the_run_up_is_simulated_because_it_is_not_slow_and_its_beat_is_seen(diagnosis):
+    doc, _ = diagnosis
+    rm = doc["response_model"]
+    assert rm["kind"] == "order-tracked run-up simulation"
+    assert abs(rm["rate_rpm_s"] - 229) < 3  # from the revolutions' timing
+    assert rm["sweep"]["sweep_parameter"] > 0.1
+    # the minima after the peak sit where a sweep's beat puts them (within 40 rpm)
+    for expected, measured in zip(rm["beat_minima_expected_rpm"][:3],
+                                  rm["measured_minima_rpm"][:3], strict=True):
+        assert abs(expected - measured) < 40
 
 
 def test_nominal_calibration_fixes_the_critical_speed(diagnosis):

@@ -210,3 +210,47 @@ def test_measurement_effects_runout_and_noise():
     snr = 10 * np.log10(np.var(clean["xO1"]) / np.var(resid))
     assert 19.0 < snr < 21.0
     pd.testing.assert_frame_equal(n1, noisy.simulate(100.0, **kw))  # seeded
+
+
+def _small_beam(kx=1e5, ky=1e5):
+    from sknarx.rotor.beam import Bearing, BeamRotor, Disk
+
+    return BeamRotor(0.5, 0.01, n_elements=10, disks=(Disk(0.25, 0.8, 0.076, 0.025),),
+                     bearings=(Bearing(0.0, kx, ky, 60.0, 60.0), Bearing(0.5, kx, ky, 60.0, 60.0)))
+
+
+def test_a_slow_run_up_tracks_the_steady_response():
+    from sknarx.rotor.runup import runup_order_response, sweep_parameter
+
+    rotor = _small_beam().with_bearings(cxx=600.0, cyy=600.0)
+    assert sweep_parameter(rotor, 2.0)["sweep_parameter"] < 0.01  # quasi-steady
+    rpm, Z = runup_order_response(rotor, 1200.0, 2300.0, 2.0, probe=0.25, n_modes=24,
+                                  samples_per_rev=64)
+    ss = rotor.probe_responses(rpm * 2 * np.pi / 60, 0.25)[:, 0, 0]
+    assert np.max(np.abs(Z[:, 0, 0, 0] - ss)) < 0.01 * np.max(np.abs(ss))
+    # isotropic: a unit unbalance 90 degrees ahead gives i times the tracked vector
+    assert np.max(np.abs(Z[:, 0, 1, 0] - 1j * Z[:, 0, 0, 0])) < 0.002 * np.max(np.abs(ss))
+
+
+def test_a_fast_run_up_lowers_and_delays_the_peak_and_leaves_a_beat():
+    from sknarx.rotor.runup import runup_order_response, sweep_parameter
+
+    rotor = _small_beam()
+    fast = sweep_parameter(rotor, 300.0)["sweep_parameter"]
+    assert fast > 10 * sweep_parameter(rotor, 3.0)["sweep_parameter"]
+    rpm_s, Zs = runup_order_response(rotor, 1200.0, 2300.0, 3.0, probe=0.25, n_modes=8)
+    rpm_f, Zf = runup_order_response(rotor, 1200.0, 2300.0, 300.0, probe=0.25, n_modes=8)
+    a_s, a_f = np.abs(Zs[:, 0, 0, 0]), np.abs(Zf[:, 0, 0, 0])
+    assert a_f.max() < 0.9 * a_s.max()
+    assert rpm_f[np.argmax(a_f)] > rpm_s[np.argmax(a_s)] + 20
+    after = a_f[rpm_f > rpm_f[np.argmax(a_f)]]
+    assert np.sum(np.diff(np.sign(np.diff(after))) > 0) >= 2  # minima of the beat
+
+
+def test_run_up_input_is_checked():
+    from sknarx.rotor.runup import runup_order_response
+
+    with pytest.raises(ValueError, match="rpm_start < rpm_end"):
+        runup_order_response(_small_beam(), 3000.0, 600.0, 100.0, probe=0.25)
+    with pytest.raises(ValueError, match="rate_rpm_s"):
+        runup_order_response(_small_beam(), 600.0, 3000.0, 0.0, probe=0.25)

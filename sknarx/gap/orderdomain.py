@@ -25,11 +25,14 @@ from scipy.optimize import least_squares
 
 from ..plotting import plt, save, to_data_uri
 from ..rotor.beam import beam_rotor_from_config
+from ..rotor.runup import runup_order_response, sweep_parameter
 
 __all__ = ["load_bode", "bin_bode", "diagnose_order_domain"]
 
 RPM = 2 * np.pi / 60.0
 RTOL = 0.02  # model-form tolerance of a lumped linear rotor
+PAIR_MARGIN = 10.0  # held-out score (AIC) a pair must gain over its best member
+SWEEP_LIMIT = 0.1  # sweep parameter above which a run-up is simulated, not taken as steady
 NOT_TESTABLE = {
     "misalignment": "AC-coupled probes give no shaft centreline, and a 1x-only record has no 2x",
     "crack": "needs 2x/3x orders, not in a 1x Bode record",
@@ -93,26 +96,81 @@ def bin_bode(rows: pd.DataFrame, width_rpm=20.0, max_n=10) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-class _Model:
-    """Linear-in-unbalance order model of the rotor at the probe."""
+def runup_rate(rows: pd.DataFrame, min_rate_rpm_s: float = 5.0):
+    """The run-up's angular acceleration (rpm/s) and speed range, or ``None``.
 
-    def __init__(self, rotor, probe):
+    Revolutions are one row each, so their times follow from their speeds
+    (``dt = 60 / rpm``); the rate is the slope of speed against time over the
+    revolutions below the final plateau. ``None`` when the speed hardly changes
+    (a stepped or steady test: steady-state responses apply).
+    """
+    rpm = np.sort(rows.rpm.to_numpy())
+    if rpm.size < 20:
+        return None
+    top = rpm[-1]
+    ramp = rpm[rpm < top - 0.02 * (top - rpm[0])]
+    if ramp.size < 10:
+        return None
+    t = np.cumsum(60.0 / ramp)
+    rate = float(np.polyfit(t, ramp, 1)[0])
+    if not rate >= min_rate_rpm_s:
+        return None
+    return {"rate_rpm_s": rate, "rpm_start": float(ramp[0]), "rpm_end": float(ramp[-1])}
+
+
+class _Model:
+    """Order model of the rotor at the probe, real-linear in the unbalances.
+
+    ``basis`` returns, per speed bin, the probe's 1x response to a unit unbalance
+    at each disk with its heavy spot at the keyphasor and 90 degrees ahead (two
+    columns per disk). With ``runup`` (see :func:`runup_rate`) the bins up to
+    ``runup_until_rpm`` come from an order-tracked simulation of the run-up at the
+    measured rate; above it (and without ``runup``) from steady-state responses.
+    """
+
+    def __init__(self, rotor, probe, runup=None, runup_until_rpm=np.inf, gyro_speed=None):
         self.rotor = rotor
         self.probe = probe
+        self.runup = runup
+        self.until = runup_until_rpm
+        self.gyro_speed = gyro_speed
 
     def basis(self, speeds, kx, ky, c, angle=0.0):
         """Probe response to unit unbalances; the probe reads the displacement along
         ``angle`` (rad) from the support's x principal axis."""
         r = self.rotor.with_bearings(kxx=kx, kyy=ky, cxx=c, cyy=c)
+        speeds = np.asarray(speeds, dtype=float)
         XY = r.probe_responses(speeds, self.probe["position"])
-        return np.cos(angle) * XY[:, :, 0] + np.sin(angle) * XY[:, :, 1]
+        H = np.cos(angle) * XY[:, :, 0] + np.sin(angle) * XY[:, :, 1]
+        B = np.empty((speeds.size, 2 * H.shape[1]), dtype=complex)
+        B[:, 0::2], B[:, 1::2] = H, 1j * H
+        rpm = speeds / RPM
+        if self.runup is not None:
+            lo, hi = self.runup["rpm_start"], min(self.runup["rpm_end"], self.until)
+            sel = (rpm >= lo) & (rpm <= hi)
+            if sel.any():
+                rr, Z = runup_order_response(r, lo, hi, self.runup["rate_rpm_s"],
+                                             self.probe["position"], n_modes=8,
+                                             samples_per_rev=64, gyro_speed=self.gyro_speed)
+                Zp = np.cos(angle) * Z[..., 0] + np.sin(angle) * Z[..., 1]  # (rev, disk, u)
+                Zp = Zp.reshape(len(rr), -1)
+                for col in range(B.shape[1]):
+                    B[sel, col] = (np.interp(rpm[sel], rr, Zp[:, col].real)
+                                   + 1j * np.interp(rpm[sel], rr, Zp[:, col].imag))
+        return B
 
 
 def _solve_linear(B, z, w):
-    """Weighted complex least squares; returns coefficients and the fitted vector."""
+    """Weighted least squares with *real* coefficients of complex columns."""
     A = B * w[:, None]
-    coef, *_ = np.linalg.lstsq(A, z * w, rcond=None)
+    coef, *_ = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.r_[(z * w).real, (z * w).imag],
+                               rcond=None)
     return coef, B @ coef
+
+
+def _complex_pairs(coef):
+    """Real coefficients of (U = 1, U = i) column pairs -> complex values."""
+    return coef[0::2] + 1j * coef[1::2]
 
 
 class _Candidate:
@@ -136,8 +194,8 @@ def _predict(model, cand, p, speeds_fit, z_fit, se_fit, speeds_eval):
     Bf = B[np.searchsorted(allsp, speeds_fit)]
     Be = B[np.searchsorted(allsp, speeds_eval)]
     if cand.runout:
-        Bf = np.column_stack([Bf, np.ones(len(speeds_fit))])
-        Be = np.column_stack([Be, np.ones(len(speeds_eval))])
+        Bf = np.column_stack([Bf, np.ones(len(speeds_fit)), 1j * np.ones(len(speeds_fit))])
+        Be = np.column_stack([Be, np.ones(len(speeds_eval)), 1j * np.ones(len(speeds_eval))])
     w = 1.0 / np.sqrt(se_fit**2 + (RTOL * np.abs(z_fit)) ** 2)
     coef, _ = _solve_linear(Bf, z_fit, w)
     return coef, Be @ coef, (kx, ky, c, angle)
@@ -192,6 +250,79 @@ def _fit(model, cand, bins, train, bounds, start=None):
     return best.x, sd_log
 
 
+def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0,
+            max_hole=2):
+    """Where each effect of a candidate acts: the speed range holding most of its gain.
+
+    The gain of an effect is, per bin, the drop of ``z^2`` it brings -- over the
+    calibrated nominal model for a single effect; for a member of a pair, over the
+    pair with the runout vector removed (runout) or over the other member alone,
+    refitted (anisotropy). Bins gaining more than ``thr`` are joined into runs (holes of
+    up to ``max_hole`` bins bridged); the strongest run outside the noisy region is
+    the location, and the four strongest runs are listed.
+    """
+    names = [r["effect"]] if isinstance(r["effect"], str) else list(r["effect"])
+    s_full = ranking_fits[json.dumps(r["effect"])]
+    rpm = bins.rpm.to_numpy()
+    out = {}
+    for name in names:
+        rest = [n for n in names if n != name]
+        if not rest:
+            s_without = s_cal
+        elif name == "runout":  # switched off inside the fit: the constant vector removed
+            R = r["params"]["runout_amplitude_m"] * np.exp(
+                1j * np.radians(r["params"]["runout_phase_deg"]))
+            s_without = s_full - R
+        else:  # the other member alone, refitted
+            s_without = ranking_fits.get(json.dumps(rest[0]))
+        if s_without is None:
+            continue
+        gain = _z2(z, s_without, se) - _z2(z, s_full, se)
+        sig = np.flatnonzero(gain > thr)
+        if sig.size == 0:
+            out[name] = {"rpm_range": None, "share_of_gain": 0.0}
+            continue
+        runs, start = [], sig[0]
+        for a, b in zip(sig[:-1], sig[1:], strict=True):
+            if b - a > max_hole + 1:
+                runs.append((start, a))
+                start = b
+        runs.append((start, sig[-1]))
+        pos = np.clip(gain, 0, None)
+        found = sorted(({"rpm_range": [float(rpm[a]), float(rpm[b])],
+                         "share_of_gain": float(pos[a:b + 1].sum() / pos.sum()),
+                         "noisy_region": bool(rpm[a] > noisy_rpm)} for a, b in runs),
+                       key=lambda x: -x["share_of_gain"])
+        # the main location: the strongest run outside the noisy region, if any
+        clean = [f for f in found if not f["noisy_region"]] or found
+        out[name] = {**clean[0], "runs": found[:4],
+                     "heldout_gain": float(np.clip(gain[held], 0, None).sum())}
+    return out
+
+
+def _local_minima(bins, lo_rpm, hi_rpm):
+    """Speeds of local minima of the binned 1x amplitude between two speeds."""
+    rpm = bins.rpm.to_numpy()
+    a = np.abs(bins.z.to_numpy())
+    i = np.flatnonzero((rpm > lo_rpm) & (rpm < hi_rpm))
+    i = i[(i > 0) & (i < len(a) - 1)]
+    return [float(rpm[k]) for k in i if a[k] < a[k - 1] and a[k] < a[k + 1]]
+
+
+def _gap_by_band(bins, z2_before, z2_after, held, noisy_rpm):
+    """Held-out excess before/after, below and above the noisy speed."""
+    rpm = bins.rpm.to_numpy()
+    out = {}
+    for name, sel in ((f"below {noisy_rpm:.0f} rpm", rpm <= noisy_rpm),
+                      (f"above {noisy_rpm:.0f} rpm (noisy)", rpm > noisy_rpm)):
+        m = sel & held
+        b = float(np.clip(z2_before[m] - 2, 0, None).sum())
+        a = float(np.clip(z2_after[m] - 2, 0, None).sum())
+        out[name] = {"heldout_excess_before": b, "heldout_excess_after": a,
+                     "shrink": 1 - a / b if b > 0 else 0.0, "bins": int(m.sum())}
+    return out
+
+
 def _blocks(n, size=3):
     """Alternating blocks of ``size`` bins: True for training, False for held-out."""
     return (np.arange(n) // size) % 2 == 0
@@ -230,6 +361,15 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     n = len(bins)
     train = _blocks(n)
     held = ~train
+    mode = meas_cfg.get("response", "auto")
+    if mode not in ("auto", "steady", "run-up"):
+        raise ValueError(f"[measurement] response must be 'auto', 'steady' or 'run-up', got "
+                         f"{mode!r}.")
+    runup = runup_rate(rows) if mode != "steady" else None
+    crit = meas_cfg.get("first_critical_rpm")
+    # beyond ~1.6x the first critical the free vibration a run-up excites has died out
+    # and the steady response applies (and is far cheaper)
+    until = 1.6 * float(crit) if crit else np.inf
     model = _Model(rotor, probe)
     cal = info["calibration"]
     bounds = (tuple(cal.get("bearing_stiffness", (1e5, 1e8))),
@@ -248,6 +388,18 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
     # calibrating the uncertain nominal values (isotropic bearing stiffness, damping)
     p_cal, sd_cal = _fit(model, nominal, bins, train, bounds)
+    sweep_note = None
+    if runup is not None:
+        # simulate the run-up when the calibrated rotor says the sweep is not slow
+        k0, c0 = 10 ** p_cal[0], 10 ** p_cal[1]
+        runup["sweep"] = sweep_parameter(rotor.with_bearings(kxx=k0, kyy=k0, cxx=c0, cyy=c0),
+                                         runup["rate_rpm_s"])
+        if mode == "run-up" or runup["sweep"]["sweep_parameter"] >= SWEEP_LIMIT:
+            model = _Model(rotor, probe, runup, runup_until_rpm=until,
+                           gyro_speed=float(crit) * RPM if crit else None)
+            p_cal, sd_cal = _fit(model, nominal, bins, train, bounds)
+        else:
+            sweep_note, runup = runup, None
     start = (p_cal[0], p_cal[1])
     coef_cal, s_cal, kcs_cal, z2_cal = evaluate(nominal, p_cal)
     E_before = float(np.clip(z2_cal[held] - 2, 0, None).sum())
@@ -255,8 +407,8 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
 
     ranking = []
     fits = {}
-    for cand in (_Candidate(True, False), _Candidate(False, True),
-                 _Candidate(True, True)):
+    cands = (_Candidate(True, False), _Candidate(False, True), _Candidate(True, True))
+    for cand in cands:
         p, sd = _fit(model, cand, bins, train, bounds, start=start)
         coef, s_all, kcs, z2 = evaluate(cand, p)
         E = float(np.clip(z2[held] - 2, 0, None).sum())
@@ -274,7 +426,7 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
         std = {k: float(v if k == "probe_angle" else v * np.log(10) * 10 ** p[i])
                for i, (k, v) in enumerate(zip(names, sd, strict=True))}
         if cand.runout:
-            R = coef[-1]
+            R = _complex_pairs(coef)[-1]
             params.update(runout_amplitude_m=float(abs(R)), runout_phase_deg=float(
                 np.degrees(np.angle(R))))
         ranking.append({
@@ -284,7 +436,7 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
             "score": E + 2.0 * (len(p) + (2 if cand.runout else 0) - 2),
             "evidence": _evidence(cand, bins, z, s_cal, s_all, params, rows),
             "unbalance_kg_m": [[float(abs(u)), float(np.degrees(np.angle(u)))] for u in
-                               coef[: len(rotor.disks)]],
+                               _complex_pairs(coef)[: len(rotor.disks)]],
         })
         fits[json.dumps(cand.label)] = s_all
     for name, why in NOT_TESTABLE.items():
@@ -294,12 +446,17 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     untested = [r for r in ranking if not r.get("testable", True)]
     best = tested[0]
     singles = [r for r in tested if isinstance(r["effect"], str)]
+    if isinstance(best["effect"], list) and singles:
+        # a pair must beat its best member by more than chance on the held-out bins:
+        # the score is an AIC (2 per parameter), and a margin of 10 is strong evidence
+        top = min(singles, key=lambda r: r["score"])
+        if top["score"] - best["score"] < PAIR_MARGIN:
+            best = top
     verdict = best["effect"] if best["shrink"] >= 0.5 else "unexplained"
-    if isinstance(verdict, list) and singles and best["shrink"] < max(
-            s["shrink"] for s in singles) + 0.15:
-        top = max(singles, key=lambda r: r["shrink"])
-        verdict = top["effect"] if top["shrink"] >= 0.5 else "unexplained"
-        best = top
+    noisy = float(meas_cfg.get("noisy_above_rpm", np.inf))
+    for r in tested:
+        r["located"] = _locate(r, ranking_fits=fits, s_cal=s_cal, bins=bins, z=z, se=se,
+                               held=held, noisy_rpm=noisy)
     s_best = fits[json.dumps(best["effect"])]
     rng = np.random.default_rng(0)
     hb = np.clip(z2_cal - 2, 0, None)
@@ -309,8 +466,37 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     for _ in range(300):
         pick = rng.choice(hidx, hidx.size, replace=True)
         boot.append(1 - ha[pick].sum() / max(hb[pick].sum(), 1e-300))
-    noisy = float(meas_cfg.get("noisy_above_rpm", np.inf))
     where = _regions(bins, z2_cal, noisy)
+    z2_best = _z2(z, s_best, se)
+    response = {"kind": "steady-state order response"}
+    if sweep_note is not None:
+        response.update(sweep=sweep_note["sweep"], rate_rpm_s=sweep_note["rate_rpm_s"],
+                        why="the run-up is slow enough to be quasi-steady")
+    s_quasi = None
+    if runup is not None:
+        # the same verdict on a quasi-steady model: how much the sweep itself matters
+        cand_best = next(c for c in cands if c.label == best["effect"])
+        steady = _Model(rotor, probe)
+        p_q, _ = _fit(steady, cand_best, bins, train, bounds, start=start)
+        _, s_quasi, _ = _predict(steady, cand_best, p_q, sp[train], z[train], se[train], sp)
+        E_q = float(np.clip(_z2(z, s_quasi, se)[held] - 2, 0, None).sum())
+        f_n = float(crit_cal[0] / RPM)
+        alpha = runup["rate_rpm_s"] * RPM
+        beat = [f_n + np.sqrt((2 * m + 1) * 2 * np.pi * alpha) / RPM for m in range(4)]
+        response = {
+            "kind": "order-tracked run-up simulation",
+            "why": "the record is a ramp; with the rotor calibrated as quasi-steady, the "
+                   "sweep parameter alpha/(zeta^2 w_n^2) at the first mode is "
+                   f"{runup['sweep']['sweep_parameter']:.2f} (>= {SWEEP_LIMIT}: not slow)",
+            "sweep": runup["sweep"],
+            "rate_rpm_s": runup["rate_rpm_s"],
+            "simulated_rpm": [runup["rpm_start"], min(runup["rpm_end"], until)],
+            "steady_above_rpm": min(runup["rpm_end"], until),
+            "verdict_heldout_excess": {"run-up model": best["heldout_gap_after"],
+                                       "quasi-steady model": E_q},
+            "beat_minima_expected_rpm": beat,
+            "measured_minima_rpm": _local_minima(bins, f_n, beat[-1] + 40),
+        }
     doc = {
         "verdict": verdict,
         "ranking": tested + untested,
@@ -326,8 +512,11 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
                                    "calibrated": float(crit_cal[0] / RPM),
                                    "measured": meas_cfg.get("first_critical_rpm")},
             "unbalance_kg_m": [[float(abs(u)), float(np.degrees(np.angle(u)))] for u in
-                               coef_cal],
+                               _complex_pairs(coef_cal)],
         },
+        "located": best.get("located", {}),
+        "gap_by_band": _gap_by_band(bins, z2_cal, z2_best, held, noisy),
+        "response_model": response,
         "gap_before": {"heldout_excess": E_before,
                        "nominal_as_described_heldout_excess": float(
                            np.clip(z2_nom[held] - 2, 0, None).sum())},
@@ -339,13 +528,18 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
             "(crack, rub, looseness) cannot be tested.",
             f"Above ~{noisy:.0f} rpm the 1x is ~0.03 V with tens of degrees of phase "
             "scatter: those bins carry large standard errors and little weight.",
-            "The run-up (~228 rpm/s) is treated as quasi-steady.",
+            (f"The run-up ({runup['rate_rpm_s']:.0f} rpm/s) is simulated and order-tracked "
+             "like the measurement; the gyroscopic matrix is frozen at the first critical "
+             "speed, and above 1.6x that speed the steady response is used."
+             if runup is not None else "The record is treated as quasi-steady."),
+            "One probe: the support anisotropy's principal axes and the probe angle are "
+            "confounded with the split; both bearings are assumed alike.",
         ],
         "sknarx_version": __version__, "command": command,
     }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    figs = _figures(out, bins, s_nom, s_cal, s_best, doc)
+    figs = _figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi)
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1, default=float))
     (out / "report.html").write_text(_html(doc, figs))
     return doc
@@ -361,8 +555,8 @@ def _evidence(cand, bins, z, s_before, s_after, params, rows):
                   "below 1250 rpm (source: 60-70 % at 1000-1200 rpm)")
     if cand.anisotropic:
         c1, c2 = params["critical_speeds_rpm"]
-        ev.append(f"split critical speed: {c1:.0f} and {c2:.0f} rpm (measured peaks 1648 "
-                  "and ~1770 rpm)")
+        ev.append(f"split critical speed: {c1:.0f} and {c2:.0f} rpm (undamped, at rest; "
+                  "PROVENANCE reads the run-up's peaks as 1648 and ~1770 rpm)")
     err_b = np.abs(z - s_before)
     err_a = np.abs(z - s_after)
     i = int(np.argmax(err_b - err_a))
@@ -371,7 +565,7 @@ def _evidence(cand, bins, z, s_before, s_after, params, rows):
     return ev
 
 
-def _figures(out, bins, s_nom, s_cal, s_best, doc):
+def _figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None):
     rpm = bins.rpm.to_numpy()
     z = bins.z.to_numpy()
     lab = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
@@ -396,6 +590,22 @@ def _figures(out, bins, s_nom, s_cal, s_best, doc):
     ax.set_aspect("equal")
     ax.legend(fontsize=7)
     figs["polar"] = save(fig, out / "polar.png")
+    if s_quasi is not None:
+        sel = (rpm > 1400) & (rpm < 2100)
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+        a1.plot(rpm[sel], np.abs(z[sel]) * 1e6, "k.-", ms=4, lw=0.5, label="measured")
+        for s, style, name in ((s_quasi, "b--", f"{lab}, quasi-steady model"),
+                               (s_best, "r-", f"{lab}, run-up simulated and order-tracked")):
+            a1.plot(rpm[sel], np.abs(s[sel]) * 1e6, style, lw=1, label=name)
+            a2.plot(rpm[sel], np.degrees(np.angle(s[sel])), style, lw=1)
+        a2.plot(rpm[sel], np.degrees(np.angle(z[sel])), "k.-", ms=4, lw=0.5)
+        for b in doc["response_model"].get("beat_minima_expected_rpm", []):
+            a1.axvline(b, color="0.6", lw=0.6, ls=":")
+        a1.set(ylabel="1x amplitude (um, 0-pk)",
+               title="Through the critical: the sweep's beat (dotted: expected minima)")
+        a1.legend(fontsize=7)
+        a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
+        figs["runup"] = save(fig, out / "runup_zoom.png")
     return figs
 
 
