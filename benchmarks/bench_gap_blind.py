@@ -156,26 +156,36 @@ def score(recs, s):
             "n_out_of_library": len(out), "n_out_of_library_with_gap": len(out_seen)}
 
 
+GRID = {"no_gap_per_feature": [0.1, 0.2, 0.3, 0.5, 0.8, 1.0, 1.5],
+        "min_shrink": [0.5, 0.6, 0.7, 0.8],
+        "min_log_shrink": [0.0, 0.3, 0.5, 0.6, 0.7],
+        "pair_trigger": [0.2, 0.5, 1.0, 2.0],
+        "pair_gain": [0.3, 0.5, 0.7]}
+
+
 def fit_thresholds(pilot, base):
     """Grid search on pilot trials: maximise the worst of the three rates.
 
-    ``pair_trigger`` can only be raised above the value the trials were run with
-    (below it, no pairs were searched).
+    Many settings tie on a few dozen pilot trials; among the tied ones each threshold
+    takes the median of its tied values (away from the edges of the tied region), if
+    that combination is itself optimal. ``pair_trigger`` can only be raised above the
+    value the trials were run with (below it, no pairs were searched).
     """
-    best, best_val = None, -1
-    grid = itertools.product([0.1, 0.2, 0.3, 0.5, 0.8, 1.0, 1.5], [0.5, 0.6, 0.7, 0.8],
-                             [0.0, 0.3, 0.5, 0.6, 0.7],
-                             [t for t in (0.2, 0.5, 1.0, 2.0) if t >= base.pair_trigger],
-                             [0.3, 0.5, 0.7])
-    for ng, ms, mls, pt, pg in grid:
-        s = replace(base, no_gap_per_feature=ng, min_shrink=ms, min_log_shrink=mls,
-                    pair_trigger=pt, pair_gain=pg)
+    def value(s):
         sc = score(pilot, s)
         vals = [sc["top1"], 1 - sc["false_alarm"], sc["unexplained_out_of_library"]]
-        val = np.nanmin(vals) + 1e-3 * np.nanmean(vals)
-        if val > best_val:
-            best, best_val = s, val
-    return best
+        return np.nanmin(vals) + 1e-3 * np.nanmean(vals)
+
+    grid = dict(GRID, pair_trigger=[t for t in GRID["pair_trigger"]
+                                    if t >= base.pair_trigger])
+    names = list(grid)
+    scored = [(value(replace(base, **dict(zip(names, combo, strict=True)))), combo)
+              for combo in itertools.product(*grid.values())]
+    top = max(v for v, _ in scored)
+    tied = [c for v, c in scored if v >= top - 1e-12]
+    mid = tuple(sorted(col)[(len(col) - 1) // 2] for col in zip(*tied, strict=True))
+    pick = mid if mid in tied else tied[0]
+    return replace(base, **dict(zip(names, pick, strict=True)))
 
 
 def run(n, seed0, phase, settings, shard=(0, 1)):
