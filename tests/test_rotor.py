@@ -213,7 +213,7 @@ def test_measurement_effects_runout_and_noise():
 
 
 def _small_beam(kx=1e5, ky=1e5):
-    from sknarx.rotor.beam import Bearing, BeamRotor, Disk
+    from sknarx.rotor.beam import BeamRotor, Bearing, Disk
 
     return BeamRotor(0.5, 0.01, n_elements=10, disks=(Disk(0.25, 0.8, 0.076, 0.025),),
                      bearings=(Bearing(0.0, kx, ky, 60.0, 60.0), Bearing(0.5, kx, ky, 60.0, 60.0)))

@@ -1,35 +1,36 @@
 """Gap diagnosis on order-domain measurements (Bode data: speed, 1x amplitude and phase).
 
 Most rotating-machinery users have order-tracked run-ups or coast-downs, not raw
-time series. This module takes such a table, bins it, and diagnoses it against a
-linear rotor described by a file (:mod:`sknarx.rotor.beam`), whose steady order
-response is exact and cheap.
+time series. This module diagnoses such a table (loaded and binned by
+:mod:`sknarx.gap.bode`) against a linear rotor described by a file
+(:mod:`sknarx.rotor.beam`): its steady order response, or -- when the record is a
+run-up too fast to be quasi-steady -- a simulated and order-tracked run-up
+(:mod:`sknarx.rotor.runup`).
 
 Model of the measured 1x vector at speed ``w``:
 ``X(w) = U1 H1(w; p) + U2 H2(w; p) [+ R]`` with ``H_j`` the response at the probe
 to a unit unbalance at disk j, ``U_j`` the (unknown, complex) residual unbalances,
 ``R`` a slow-roll runout vector and ``p`` the bearing parameters. For given ``p``
-the complex unknowns enter linearly and are solved in closed form (variable
+the unknowns enter linearly (real-linearly in a run-up, where the acceleration
+breaks the rotational symmetry) and are solved in closed form (variable
 projection); ``p`` is fitted by least squares from several starts.
 """
 
 from __future__ import annotations
 
-import html
 import json
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 from scipy.optimize import least_squares
 
-from ..plotting import plt, save, to_data_uri
 from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import runup_order_response, sweep_parameter
+from .bode import RPM, bin_bode, load_bode, runup_rate
+from .bode_report import figures, html_report
 
-__all__ = ["load_bode", "bin_bode", "diagnose_order_domain"]
+__all__ = ["load_bode", "bin_bode", "runup_rate", "diagnose_order_domain"]
 
-RPM = 2 * np.pi / 60.0
 RTOL = 0.02  # model-form tolerance of a lumped linear rotor
 PAIR_MARGIN = 10.0  # held-out score (AIC) a pair must gain over its best member
 SWEEP_LIMIT = 0.1  # sweep parameter above which a run-up is simulated, not taken as steady
@@ -42,80 +43,6 @@ NOT_TESTABLE = {
     "speed-fluctuation": "needs the raw signal (sidebands); order tracking removes it",
     "noise": "characterised from the scatter of the order vectors, not a verdict",
 }
-
-
-def load_bode(path, measurement: dict) -> pd.DataFrame:
-    """One row per revolution: speed (rad/s) and the complex 1x vector (m, 0-peak).
-
-    ``measurement`` names the columns and units (see ``examples/rk4/rotor.toml``).
-    """
-    df = pd.read_csv(path)
-    sc = measurement.get("speed_column", "rpm")
-    ac = measurement.get("amplitude_column", "amp_1x")
-    pc = measurement.get("phase_column", "phase_1x_deg")
-    missing = [c for c in (sc, ac, pc) if c not in df.columns]
-    if missing:
-        raise ValueError(f"The Bode file lacks column(s) {missing}; the rotor file's "
-                         "[measurement] section names the speed, amplitude and phase columns.")
-    d = df[[sc, ac, pc]].apply(pd.to_numeric, errors="coerce")
-    if d.isna().any().any():
-        raise ValueError("The Bode file has empty or non-numeric values; clean it first.")
-    rpm = d[sc].to_numpy()
-    amp = d[ac].to_numpy() * float(measurement.get("amplitude_scale", 1.0))
-    ph = np.radians(d[pc].to_numpy())
-    if np.any(rpm <= 0) or np.any(amp < 0):
-        raise ValueError("Speeds must be positive and amplitudes non-negative.")
-    return pd.DataFrame({"rpm": rpm, "speed": rpm * RPM, "z": amp * np.exp(1j * ph)})
-
-
-def bin_bode(rows: pd.DataFrame, width_rpm=20.0, max_n=10) -> pd.DataFrame:
-    """Vector-average revolutions in speed bins, with a standard error per bin.
-
-    The per-revolution noise is estimated from second differences of successive
-    revolutions (blind to a response that varies linearly with speed, as it does
-    between revolutions even near a resonance), as a running median over 31
-    revolutions; a bin's standard error uses at most ``max_n`` revolutions, so the
-    dense 5000 rpm plateau does not outweigh the run-up.
-    """
-    rows = rows.sort_values("rpm").reset_index(drop=True)
-    edges = np.arange(np.floor(rows.rpm.min()), rows.rpm.max() + width_rpm, width_rpm)
-    idx = np.digitize(rows.rpm, edges)
-    z = rows.z.to_numpy()
-    d2 = np.abs(z[2:] - 2 * z[1:-1] + z[:-2]) / np.sqrt(6.0)
-    d2 = np.r_[d2[0], d2, d2[-1]]
-    # median of |complex Gaussian| is sigma*sqrt(2 ln 2) per component pair
-    local = pd.Series(d2).rolling(31, center=True, min_periods=5).median()
-    rows["noise"] = local.to_numpy() / np.sqrt(2 * np.log(2))
-    out = []
-    for _, g in rows.groupby(idx):
-        n = len(g)
-        sigma = float(np.median(g.noise))
-        out.append({"rpm": float(g.rpm.mean()), "speed": float(g.speed.mean()),
-                    "z": complex(g.z.mean()), "n": n,
-                    "se": sigma / np.sqrt(min(n, max_n))})
-    return pd.DataFrame(out)
-
-
-def runup_rate(rows: pd.DataFrame, min_rate_rpm_s: float = 5.0):
-    """The run-up's angular acceleration (rpm/s) and speed range, or ``None``.
-
-    Revolutions are one row each, so their times follow from their speeds
-    (``dt = 60 / rpm``); the rate is the slope of speed against time over the
-    revolutions below the final plateau. ``None`` when the speed hardly changes
-    (a stepped or steady test: steady-state responses apply).
-    """
-    rpm = np.sort(rows.rpm.to_numpy())
-    if rpm.size < 20:
-        return None
-    top = rpm[-1]
-    ramp = rpm[rpm < top - 0.02 * (top - rpm[0])]
-    if ramp.size < 10:
-        return None
-    t = np.cumsum(60.0 / ramp)
-    rate = float(np.polyfit(t, ramp, 1)[0])
-    if not rate >= min_rate_rpm_s:
-        return None
-    return {"rate_rpm_s": rate, "rpm_start": float(ramp[0]), "rpm_end": float(ramp[-1])}
 
 
 class _Model:
@@ -539,9 +466,9 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    figs = _figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi)
+    figs = figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi)
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1, default=float))
-    (out / "report.html").write_text(_html(doc, figs))
+    (out / "report.html").write_text(html_report(doc, figs))
     return doc
 
 
@@ -563,87 +490,3 @@ def _evidence(cand, bins, z, s_before, s_after, params, rows):
     ev.append(f"largest gain at {bins.rpm.iloc[i]:.0f} rpm: |gap| {1e6 * err_b[i]:.1f} -> "
               f"{1e6 * err_a[i]:.1f} um")
     return ev
-
-
-def _figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None):
-    rpm = bins.rpm.to_numpy()
-    z = bins.z.to_numpy()
-    lab = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-    a1.semilogy(rpm, np.abs(z) * 1e6, "k.", ms=3, label="measured (binned)")
-    for s, style, name in ((s_nom, "c:", "nominal as described"),
-                           (s_cal, "b--", "nominal, calibrated bearings"),
-                           (s_best, "r-", f"corrected: {lab}")):
-        a1.semilogy(rpm, np.abs(s) * 1e6, style, lw=1, label=name)
-        a2.plot(rpm, np.degrees(np.angle(s)), style, lw=1)
-    a2.plot(rpm, np.degrees(np.angle(z)), "k.", ms=3)
-    a1.set(ylabel="1x amplitude (um, 0-pk)", title="RK-4 run-up: Bode plot")
-    a1.legend(fontsize=7)
-    a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
-    figs = {"bode": save(fig, out / "bode.png")}
-    fig, ax = plt.subplots(figsize=(5, 5))
-    sel = rpm < 2400
-    ax.plot(z.real[sel] * 1e6, z.imag[sel] * 1e6, "k.", ms=3, label="measured")
-    for s, style, name in ((s_cal, "b--", "nominal, calibrated"), (s_best, "r-", "corrected")):
-        ax.plot(s.real[sel] * 1e6, s.imag[sel] * 1e6, style, lw=1, label=name)
-    ax.set(xlabel="Re 1x (um)", ylabel="Im 1x (um)", title="Polar plot (< 2400 rpm)")
-    ax.set_aspect("equal")
-    ax.legend(fontsize=7)
-    figs["polar"] = save(fig, out / "polar.png")
-    if s_quasi is not None:
-        sel = (rpm > 1400) & (rpm < 2100)
-        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-        a1.plot(rpm[sel], np.abs(z[sel]) * 1e6, "k.-", ms=4, lw=0.5, label="measured")
-        for s, style, name in ((s_quasi, "b--", f"{lab}, quasi-steady model"),
-                               (s_best, "r-", f"{lab}, run-up simulated and order-tracked")):
-            a1.plot(rpm[sel], np.abs(s[sel]) * 1e6, style, lw=1, label=name)
-            a2.plot(rpm[sel], np.degrees(np.angle(s[sel])), style, lw=1)
-        a2.plot(rpm[sel], np.degrees(np.angle(z[sel])), "k.-", ms=4, lw=0.5)
-        for b in doc["response_model"].get("beat_minima_expected_rpm", []):
-            a1.axvline(b, color="0.6", lw=0.6, ls=":")
-        a1.set(ylabel="1x amplitude (um, 0-pk)",
-               title="Through the critical: the sweep's beat (dotted: expected minima)")
-        a1.legend(fontsize=7)
-        a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
-        figs["runup"] = save(fig, out / "runup_zoom.png")
-    return figs
-
-
-def _html(doc, figs):
-    v = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
-    rows = "".join(
-        f"<tr><td>{html.escape(str(r['effect']))}</td><td>{r['shrink']:.2f}</td>"
-        f"<td>{html.escape(json.dumps(r['params'], default=float))}</td>"
-        f"<td>{html.escape('; '.join(r['evidence']))}</td></tr>"
-        for r in doc["ranking"] if r.get("testable", True))
-    untested = "".join(f"<li>{html.escape(r['effect'])}: {html.escape(r['reason'])}</li>"
-                       for r in doc["ranking"] if not r.get("testable", True))
-    where = "".join(
-        f"<tr><td>{r['rpm_range'][0]:.0f}-{r['rpm_range'][1]:.0f}</td><td>{r['order']}</td>"
-        f"<td>{100 * r['share']:.1f} %</td><td>{'yes' if r['noisy_region'] else ''}</td></tr>"
-        for r in doc["where"][:12])
-    imgs = "".join(f'<figure><img src="{to_data_uri(p)}"></figure>' for p in figs.values())
-    nc = doc["nominal_calibration"]
-    css = ("body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto}"
-           "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
-           "padding:3px 6px}img{max-width:100%}")
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>sknarx gap: order
-domain</title><style>{css}</style></head><body><h1>Sim-to-real gap: order-domain diagnosis</h1>
-<p>sknarx {html.escape(doc['sknarx_version'])}; <code>{html.escape(doc['command'])}</code></p>
-<h2>Verdict: {html.escape(v)} - {100 * doc['shrink']:.0f} % of the held-out gap removed
-(5-95 %: {100 * doc['shrink_band'][0]:.0f}-{100 * doc['shrink_band'][1]:.0f} %)</h2>
-<h2>Nominal calibration</h2><p>The described rotor's first critical speed is
-{nc['first_critical_rpm']['nominal']:.0f} rpm against the measured
-{nc['first_critical_rpm']['measured']} rpm: the bearing stiffness (uncertain) was calibrated
-from {nc['bearing_stiffness_N_per_m']['nominal']:.3g} to
-{nc['bearing_stiffness_N_per_m']['calibrated']:.3g} +- {nc['bearing_stiffness_N_per_m']['std']:.2g}
-N/m and the damping from {nc['bearing_damping_N_s_per_m']['nominal']:.3g} to
-{nc['bearing_damping_N_s_per_m']['calibrated']:.3g} +- {nc['bearing_damping_N_s_per_m']['std']:.2g}
-N s/m (first critical now {nc['first_critical_rpm']['calibrated']:.0f} rpm).</p>
-{imgs}
-<h2>Where</h2><table><tr><th>rpm</th><th>order</th><th>share of gap</th><th>noisy region</th>
-</tr>{where}</table>
-<h2>Which</h2><table><tr><th>candidate</th><th>shrink</th><th>parameters</th><th>evidence</th>
-</tr>{rows}</table><p>Not testable with these data:</p><ul>{untested}</ul>
-<h2>Limits</h2><ul>{''.join(f'<li>{html.escape(x)}</li>' for x in doc['limits'])}</ul>
-</body></html>"""
