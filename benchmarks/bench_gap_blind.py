@@ -188,7 +188,7 @@ def fit_thresholds(pilot, base):
     return replace(base, **dict(zip(names, pick, strict=True)))
 
 
-def run(n, seed0, phase, settings, shard=(0, 1)):
+def run(n, seed0, phase, settings, shard=(0, 1), report_only=False):
     """Run (or reload) the trials of ``phase``; ``shard = (k, n)`` runs every n-th only.
 
     Each process appends to its own log; all logs of the phase are read back.
@@ -215,7 +215,7 @@ def run(n, seed0, phase, settings, shard=(0, 1)):
             if "skipped" not in done[seed]:
                 recs.append(done[seed])
             continue
-        if i % n_shards != k:
+        if i % n_shards != k or report_only:
             continue
         r = run_trial(kind, seed, settings)
         r["commit"], r["diagnosis_code"] = commit, code
@@ -228,7 +228,8 @@ def run(n, seed0, phase, settings, shard=(0, 1)):
         print(f"  seed {seed} {str(r['kind']):28s} e0 {r['e0']:9.2f} "
               f"best {r['ranking'][0]['effect'] if r['ranking'] else '-'} "
               f"({r['seconds']:.0f} s)", flush=True)
-    return recs
+    n_logged = sum(1 for _, seed in plan(n, seed0) if seed in done) if report_only else n
+    return recs, n_logged
 
 
 def confusion(recs, s):
@@ -248,15 +249,17 @@ def main():
     ap.add_argument("--shard", default="0/1",
                     help="K/N: run every N-th trial from the K-th (parallel processes); "
                          "run once more without it to write the report")
+    ap.add_argument("--report-only", action="store_true",
+                    help="write the report from the logged trials, running none")
     args = ap.parse_args()
     shard = tuple(int(v) for v in args.shard.split("/"))
     RESULTS.mkdir(exist_ok=True)
     # pairs are searched from a low trigger so the fitted trigger can be any value above
     base = replace(DiagnosisSettings(), pair_trigger=0.2)
     print("pilot trials (threshold fitting)")
-    pilot = run(args.pilot, 1000, "pilot", base, shard)
+    pilot, n_pilot = run(args.pilot, 1000, "pilot", base, shard, args.report_only)
     print("evaluation trials (fresh seeds)")
-    ev = run(args.trials, 5000, "eval", base, shard)
+    ev, n_eval = run(args.trials, 5000, "eval", base, shard, args.report_only)
     if shard[1] > 1:
         print("shard done; run without --shard to write the report")
         return
@@ -272,6 +275,14 @@ def main():
         "targets": {"top1": 0.9, "false_alarm": 0.05, "unexplained_out_of_library": 0.8,
                     "shrink_vs_oracle_median": 0.9, "n_trials": 100},
         "confusion": confusion(ev, frozen), "n_trials": len(ev),
+        "planned": {"pilot": args.pilot, "evaluation": args.trials},
+        "complete": n_pilot == args.pilot and n_eval == args.trials,
+        "misclassified": [{"seed": r["seed"], "truth": truth_label(r),
+                           "verdict": verdict(r, frozen)[0], "e0": r["e0"]}
+                          for r in ev if (detectable(r, frozen) or not r["in_library"]
+                                          or r["kind"] == "none")
+                          and verdict(r, frozen)[0] != (truth_label(r) if r["in_library"]
+                                                        else "unexplained")],
         "median_seconds": float(np.median(times)), "library": sorted(EFFECTS),
     })
 

@@ -71,6 +71,18 @@ def html_report(doc, figs):
         for r in doc["where"][:12])
     imgs = "".join(f'<figure><img src="{to_data_uri(p)}"></figure>' for p in figs.values())
     nc = doc["nominal_calibration"]
+    rm = doc.get("response_model", {})
+    vm = rm.get("verdict_heldout_excess")
+    verdict_models = ("" if not vm else "Held-out excess of the verdict: " + ", ".join(
+        f"{k} {v:.0f}" for k, v in vm.items()) + ".")
+    located = "".join(
+        f"<li>{html.escape(name)}: {loc['rpm_range'][0]:.0f}-{loc['rpm_range'][1]:.0f} rpm "
+        f"({100 * loc['share_of_gain']:.0f} % of its gain)</li>"
+        for name, loc in doc.get("located", {}).items() if loc.get("rpm_range"))
+    bands = "".join(
+        f"<tr><td>{html.escape(k)}</td><td>{v['heldout_excess_before']:.0f}</td>"
+        f"<td>{v['heldout_excess_after']:.0f}</td><td>{100 * v['shrink']:.0f} %</td></tr>"
+        for k, v in doc.get("gap_by_band", {}).items())
     css = ("body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto}"
            "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
            "padding:3px 6px}img{max-width:100%}")
@@ -88,6 +100,11 @@ N/m and the damping from {nc['bearing_damping_N_s_per_m']['nominal']:.3g} to
 {nc['bearing_damping_N_s_per_m']['calibrated']:.3g} +- {nc['bearing_damping_N_s_per_m']['std']:.2g}
 N s/m (first critical now {nc['first_critical_rpm']['calibrated']:.0f} rpm).</p>
 {imgs}
+<h2>Response model</h2><p>{html.escape(rm.get('kind', ''))}: {html.escape(rm.get('why', ''))}.
+{html.escape(verdict_models)}</p>
+<h2>Where each effect acts</h2><ul>{located}</ul>
+<h2>Gap by band (held-out)</h2><table><tr><th>band</th><th>before</th><th>after</th>
+<th>shrink</th></tr>{bands}</table>
 <h2>Where</h2><table><tr><th>rpm</th><th>order</th><th>share of gap</th><th>noisy region</th>
 </tr>{where}</table>
 <h2>Which</h2><table><tr><th>candidate</th><th>shrink</th><th>parameters</th><th>evidence</th>
