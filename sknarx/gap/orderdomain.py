@@ -414,9 +414,11 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     if runup is not None:
         # the same verdict on a quasi-steady model: how much the sweep itself matters
         cand_best = next(c for c in cands if c.label == best["effect"])
-        steady = _Model(rotor, probe)
-        p_q, _ = _fit(steady, cand_best, bins, train, bounds, start=start)
-        _, s_quasi, _ = _predict(steady, cand_best, p_q, sp[train], z[train], se[train], sp)
+        # started from the quasi-steady calibration, not the run-up one
+        p_q, _ = _fit(steady_model, cand_best, bins, train, bounds,
+                      start=(p_steady[0][0], p_steady[0][1]))
+        _, s_quasi, _ = _predict(steady_model, cand_best, p_q, sp[train], z[train], se[train],
+                                 sp)
         E_q = float(np.clip(_z2(z, s_quasi, se)[held] - 2, 0, None).sum())
         f_n = float(crit_cal[0] / RPM)
         alpha = runup["rate_rpm_s"] * RPM

@@ -32,6 +32,20 @@ from scipy.signal import lfilter, lfiltic
 
 __all__ = ["runup_order_response", "sweep_parameter"]
 
+_RAD = 2 * np.pi / 60.0  # rad/s per rev/min
+
+
+def _modal_state(rotor, n_modes, gyro_speed):
+    """Lowest undamped modes ``P``, reduced ``M^-1`` and the state matrix at one speed."""
+    M, C, G, K = rotor.matrices()
+    n_modes = min(n_modes, M.shape[0])
+    _, P = sla.eigh(K, M, subset_by_index=[0, n_modes - 1])
+    Mr, Cr, Gr, Kr = (P.T @ X @ P for X in (M, C, G, K))
+    Minv = np.linalg.inv(Mr)
+    A = np.block([[np.zeros((n_modes, n_modes)), np.eye(n_modes)],
+                  [-Minv @ Kr, -Minv @ (Cr + gyro_speed * Gr)]])
+    return P, Minv, A
+
 
 def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: float,
                          probe: float, n_modes: int = 16, samples_per_rev: int = 128,
@@ -79,16 +93,10 @@ def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: fl
         raise ValueError(f"Need 0 < rpm_start < rpm_end, got {rpm_start} and {rpm_end}.")
     if not rate_rpm_s > 0:
         raise ValueError(f"rate_rpm_s must be positive, got {rate_rpm_s}.")
-    to_rad = 2 * np.pi / 60.0
-    w0, w1, alpha = rpm_start * to_rad, rpm_end * to_rad, rate_rpm_s * to_rad
-    M, C, G, K = rotor.matrices()
-    n_modes = min(n_modes, M.shape[0])
-    _, P = sla.eigh(K, M, subset_by_index=[0, n_modes - 1])
-    Mr, Cr, Gr, Kr = (P.T @ A @ P for A in (M, C, G, K))
+    w0, w1, alpha = rpm_start * _RAD, rpm_end * _RAD, rate_rpm_s * _RAD
     wg = 0.5 * (w0 + w1) if gyro_speed is None else gyro_speed
-    Minv = np.linalg.inv(Mr)
-    A = np.block([[np.zeros((n_modes, n_modes)), np.eye(n_modes)],
-                  [-Minv @ Kr, -Minv @ (Cr + wg * Gr)]])
+    P, Minv, A = _modal_state(rotor, n_modes, wg)
+    n_modes = P.shape[1]
     lam, V = np.linalg.eig(A)
     Vinv = np.linalg.inv(V)
     j = 4 * rotor.node(probe)
@@ -110,7 +118,7 @@ def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: fl
     # difference of the cumulative (trapezoidal) integral of x e^{-i theta} d theta
     n_rev = int(theta[-1] // (2 * np.pi))
     bounds = 2 * np.pi * np.arange(n_rev + 1)
-    rpm = np.interp(2 * np.pi * (np.arange(n_rev) + 0.5), theta, w) / to_rad
+    rpm = np.interp(2 * np.pi * (np.arange(n_rev) + 0.5), theta, w) / _RAD
     dth = np.diff(theta)
     kern = np.exp(-1j * theta) / np.pi
 
@@ -155,17 +163,12 @@ def sweep_parameter(rotor, rate_rpm_s: float, n_modes: int = 8) -> dict:
     the tracked peak and leave a beat behind it (the steady-state response is a
     fair model only well below that).
     """
-    M, C, G, K = rotor.matrices()
-    n_modes = min(n_modes, M.shape[0])
-    _, P = sla.eigh(K, M, subset_by_index=[0, n_modes - 1])
-    Mr, Cr, Kr = (P.T @ A @ P for A in (M, C, K))
-    Minv = np.linalg.inv(Mr)
-    A = np.block([[np.zeros((n_modes, n_modes)), np.eye(n_modes)], [-Minv @ Kr, -Minv @ Cr]])
+    _, _, A = _modal_state(rotor, n_modes, 0.0)  # at rest: no gyroscopic split
     lam = np.linalg.eigvals(A)
     lam = lam[lam.imag > 0]
     first = lam[np.argmin(np.abs(lam))]
     wn = abs(first)
     zeta = -first.real / wn
-    alpha = rate_rpm_s * 2 * np.pi / 60.0
-    return {"first_mode_rpm": float(wn * 60 / (2 * np.pi)), "damping_ratio": float(zeta),
+    alpha = rate_rpm_s * _RAD
+    return {"first_mode_rpm": float(wn / _RAD), "damping_ratio": float(zeta),
             "sweep_parameter": float(alpha / (zeta**2 * wn**2))}
