@@ -161,7 +161,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     and the cheapest probe, like local search alone, often sits in the wrong basin.
     ``probe_from`` (index into the search vector) restricts the probes to the
     trailing parameters -- a pair warm-started from its leading effect's fit probes
-    only the partner.
+    only the partner. ``max_nfev=0`` returns the best probe without a local run.
     """
     from scipy.stats import qmc
 
@@ -206,6 +206,13 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         probes.append((float(np.sum(residual(base) ** 2)), base))
         probes.sort(key=lambda p: p[0])
         x0s = [x for _, x in probes[:n_short]]
+        if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)
+            nuis, effects = _decode(probes[0][1], classes, log)
+            return Calibration(
+                names=tuple(c.name for c in classes),
+                effect_params=[{n: getattr(e, n) for n in type(e).bounds} for e in effects],
+                nuisance=dict(zip(NUISANCE, map(float, nuis), strict=True)), std={},
+                cost=probes[0][0], n_params=len(lo), success=False, x=probes[0][1])
 
     def local(x0, nfev):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,

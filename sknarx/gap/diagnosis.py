@@ -173,7 +173,13 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         # candidate, warm-started from its own fit (only the partner is probed)
         lead = best["_names"][0]
         lead_x = best["_cal"].x
-        partners = _partners(best, ranked, settings.n_partners)
+
+        def probe_partner(partner):
+            # an effect masked by a dominant one fits badly on its own: score each
+            # candidate by probing it on top of the leading fit instead
+            cal = calibrate(model, meas, train, [EFFECTS[lead], EFFECTS[partner]],
+                            starts=[lead_x], max_nfev=0, probe_from=len(lead_x))
+            return cal.cost, partner
 
         def run_pair(partner):
             classes = [EFFECTS[lead], EFFECTS[partner]]
@@ -181,10 +187,23 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                             max_nfev=settings.max_nfev, probe_from=len(lead_x))
             return _held(classes, (lead, partner), cal)
 
+        def continue_single():
+            # the pairs get a warm-started run; so does the single, or a partner would
+            # take the credit for the lead's own convergence
+            classes = [EFFECTS[lead]]
+            cal = calibrate(model, meas, train, classes, starts=[lead_x],
+                            max_nfev=settings.max_nfev, n_probe=0)
+            return _held(classes, (lead,), cal)
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            scores = [probe_partner(c) for c in candidates if c != lead]
+            partners = [p for _, p in sorted(scores)[: settings.n_partners]]
             pairs = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
                 delayed(run_pair)(c) for c in partners)
+            more = continue_single()
+        if more[2] < best["_E"]:
+            singles = [more if r[0] == (lead,) else r for r in singles]
         tick("pairs")
     ranked_all = _rank(singles + pairs, E0, cmp0)
     choice = decide(e0, ranked_all, settings, n_features)
@@ -241,26 +260,6 @@ def decide(e0, ranking, settings, n_features):
     return choice if ok else None
 
 
-def _partners(best, ranked, k):
-    """The ``k`` other singles that, alone, best explained the features the best left.
-
-    Scored without new simulations: per held-out feature, the share of the gap the
-    leading effect left that the candidate removed on its own.
-    """
-    key = ["speed", "window", "channel", "feature"]
-    left = best["_cmp"].set_index(key)["excess"]
-    scored = []
-    for r in ranked:
-        if r is best or r["_cmp"] is None:
-            continue
-        after = r["_cmp"].set_index(key)["excess"].reindex(left.index).fillna(np.inf)
-        before = r["_before"].reindex(left.index).fillna(0.0)
-        fixed = np.clip(before - after, 0.0, None)
-        scored.append((float(np.minimum(fixed, left).sum()), r["_names"][0]))
-    scored.sort(key=lambda s: -s[0])
-    return [name for _, name in scored[:k]]
-
-
 def _effect_starts(nuis, classes):
     """A second start with every effect parameter at 60 % of its (log) range."""
     x = list(nuis)
@@ -298,7 +297,6 @@ def _rank(results, E0, cmp0):
             ["the calibrated model diverges at a held-out speed"],
             "signature": [EFFECTS[n].signature for n in names],
             "_names": names, "_shrink": shrink, "_E": E, "_cmp": cmp, "_cal": cal,
-            "_before": cmp0.set_index(["speed", "window", "channel", "feature"])["excess"],
         })
     out.sort(key=lambda r: r["score"])
     return out

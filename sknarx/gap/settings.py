@@ -25,7 +25,7 @@ class DiagnosisSettings:
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
     pair_trigger: float = 0.5  # try pairs when the best single leaves this excess per feature
     pair_gain: float = 0.3  # a pair must remove this share of what the best single leaves
-    n_partners: int = 3  # partners tried with the best single (by the gap they explain)
+    n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
     transient_s: float = 0.5
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
