@@ -156,8 +156,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
 
     def run(names):
         classes = [EFFECTS[n] for n in names]
-        starts = [nuis_start] + _effect_starts(nuis_start, classes)
-        cal = calibrate(model, meas, train, classes, starts=starts, max_nfev=settings.max_nfev)
+        cal = calibrate(model, meas, train, classes, starts=[nuis_start],
+                        max_nfev=settings.max_nfev)
         return _held(classes, names, cal)
 
     with warnings.catch_warnings():
@@ -258,16 +258,6 @@ def decide(e0, ranking, settings, n_features):
     ok = (choice["_shrink"] >= settings.min_shrink
           and choice["log_shrink"] >= settings.min_log_shrink)
     return choice if ok else None
-
-
-def _effect_starts(nuis, classes):
-    """A second start with every effect parameter at 60 % of its (log) range."""
-    x = list(nuis)
-    for cls in classes:
-        for a, b, sc in cls.bounds.values():
-            lo, hi = (np.log10(a), np.log10(b)) if sc == "log" else (a, b)
-            x.append(lo + 0.6 * (hi - lo))
-    return [np.array(x)]
 
 
 def _log_shrink(cmp0, cmp):

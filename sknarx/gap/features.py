@@ -46,7 +46,8 @@ def _line_energy(r, fs, omega):
     nb = len(NONSYNC_LABELS)
     if n < 16:
         return np.zeros(nb), 0.0
-    P = np.abs(np.fft.rfft(r * np.hanning(n))) ** 2
+    win = np.hanning(n)
+    P = np.abs(np.fft.rfft(r * win)) ** 2
     P = P[1:]
     order = np.arange(1, P.size + 1) * fs / n * 2 * np.pi / max(omega, 1e-12)
     level = np.median(P) / np.log(2.0)  # exponential distribution of white periodogram bins
@@ -54,7 +55,7 @@ def _line_energy(r, fs, omega):
     excess = np.where(P > thr, np.clip(P - level, 0.0, None), 0.0)
     band = np.searchsorted(NONSYNC_BANDS, order, side="right") - 1
     per_band = np.bincount(band, weights=excess, minlength=nb)[:nb]
-    scale = 2.0 / (np.hanning(n).sum() ** 2)  # periodogram -> squared amplitude
+    scale = 2.0 / (win.sum() ** 2)  # periodogram -> squared amplitude
     return np.sqrt(per_band * scale), float(np.sqrt(level * scale))
 
 
