@@ -168,11 +168,29 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     ranked = _rank(singles, E0, cmp0)
     best = ranked[0] if ranked else None
     pairs = []
-    if best is not None and best["_E"] / n_features > settings.pair_trigger:
-        # what the best single effect leaves is still a gap: pair it with every other
-        # candidate, warm-started from its own fit (only the partner is probed)
+    if best is not None:
         lead = best["_names"][0]
         lead_x = best["_cal"].x
+
+        def continue_single():
+            # a pair gets a warm-started run from the lead's fit; so does the lead, or a
+            # partner would take the credit for the lead's own convergence. Done whether
+            # or not pairs are tried, so the verdict does not depend on the pair trigger
+            classes = [EFFECTS[lead]]
+            cal = calibrate(model, meas, train, classes, starts=[lead_x],
+                            max_nfev=settings.max_nfev, n_probe=0)
+            return _held(classes, (lead,), cal)
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            more = continue_single()
+        if more[2] < best["_E"]:
+            singles = [more if r[0] == (lead,) else r for r in singles]
+            best = _rank(singles, E0, cmp0)[0]
+        tick("lead continued")
+    if best is not None and best["_E"] / n_features > settings.pair_trigger:
+        # what the best single effect leaves is still a gap: pair it with every other
+        # candidate, warm-started from the lead's first fit (only the partner is probed)
 
         def probe_partner(partner):
             # an effect masked by a dominant one fits badly on its own: score each
@@ -187,23 +205,12 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                             max_nfev=settings.max_nfev, probe_from=len(lead_x))
             return _held(classes, (lead, partner), cal)
 
-        def continue_single():
-            # the pairs get a warm-started run; so does the single, or a partner would
-            # take the credit for the lead's own convergence
-            classes = [EFFECTS[lead]]
-            cal = calibrate(model, meas, train, classes, starts=[lead_x],
-                            max_nfev=settings.max_nfev, n_probe=0)
-            return _held(classes, (lead,), cal)
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scores = [probe_partner(c) for c in candidates if c != lead]
             partners = [p for _, p in sorted(scores)[: settings.n_partners]]
             pairs = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
                 delayed(run_pair)(c) for c in partners)
-            more = continue_single()
-        if more[2] < best["_E"]:
-            singles = [more if r[0] == (lead,) else r for r in singles]
         tick("pairs")
     ranked_all = _rank(singles + pairs, E0, cmp0)
     choice = decide(e0, ranked_all, settings, n_features)
