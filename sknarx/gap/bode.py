@@ -10,9 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..rotor.runup import RPM  # one definition, in the rotor layer the data flow from
+
 __all__ = ["RPM", "load_bode", "bin_bode", "runup_rate"]
 
-RPM = 2 * np.pi / 60.0  # rad/s per rev/min
 
 
 def load_bode(path, measurement: dict) -> pd.DataFrame:

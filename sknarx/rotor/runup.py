@@ -30,9 +30,9 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.signal import lfilter, lfiltic
 
-__all__ = ["runup_order_response", "sweep_parameter"]
+__all__ = ["RPM", "runup_order_response", "sweep_parameter"]
 
-_RAD = 2 * np.pi / 60.0  # rad/s per rev/min
+RPM = 2 * np.pi / 60.0  # rad/s per rev/min
 
 
 def _modal_state(rotor, n_modes, gyro_speed):
@@ -93,7 +93,7 @@ def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: fl
         raise ValueError(f"Need 0 < rpm_start < rpm_end, got {rpm_start} and {rpm_end}.")
     if not rate_rpm_s > 0:
         raise ValueError(f"rate_rpm_s must be positive, got {rate_rpm_s}.")
-    w0, w1, alpha = rpm_start * _RAD, rpm_end * _RAD, rate_rpm_s * _RAD
+    w0, w1, alpha = rpm_start * RPM, rpm_end * RPM, rate_rpm_s * RPM
     wg = 0.5 * (w0 + w1) if gyro_speed is None else gyro_speed
     P, Minv, A = _modal_state(rotor, n_modes, wg)
     n_modes = P.shape[1]
@@ -118,7 +118,7 @@ def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: fl
     # difference of the cumulative (trapezoidal) integral of x e^{-i theta} d theta
     n_rev = int(theta[-1] // (2 * np.pi))
     bounds = 2 * np.pi * np.arange(n_rev + 1)
-    rpm = np.interp(2 * np.pi * (np.arange(n_rev) + 0.5), theta, w) / _RAD
+    rpm = np.interp(2 * np.pi * (np.arange(n_rev) + 0.5), theta, w) / RPM
     dth = np.diff(theta)
     kern = np.exp(-1j * theta) / np.pi
 
@@ -169,6 +169,6 @@ def sweep_parameter(rotor, rate_rpm_s: float, n_modes: int = 8) -> dict:
     first = lam[np.argmin(np.abs(lam))]
     wn = abs(first)
     zeta = -first.real / wn
-    alpha = rate_rpm_s * _RAD
-    return {"first_mode_rpm": float(wn / _RAD), "damping_ratio": float(zeta),
+    alpha = rate_rpm_s * RPM
+    return {"first_mode_rpm": float(wn / RPM), "damping_ratio": float(zeta),
             "sweep_parameter": float(alpha / (zeta**2 * wn**2))}
