@@ -15,7 +15,6 @@ from ..rotor.runup import RPM  # one definition, in the rotor layer the data flo
 __all__ = ["RPM", "load_bode", "bin_bode", "runup_rate"]
 
 
-
 def load_bode(path, measurement: dict) -> pd.DataFrame:
     """One row per revolution: speed (rad/s) and the complex 1x vector (m, 0-peak).
 

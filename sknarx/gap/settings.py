@@ -2,8 +2,8 @@
 
 The no-gap threshold is the noise floor measured on effect-free trials and the other
 verdict thresholds are fitted on the pilot trials of ``benchmarks/bench_gap_blind.py``,
-then all are frozen here; the search-effort fields
-decide what is computed (the benchmark reuses a logged trial only if they match).
+then all are frozen here; the search-effort fields decide what is computed (the
+benchmark reuses a logged trial only if they match).
 """
 
 from __future__ import annotations
