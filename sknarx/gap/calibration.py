@@ -207,12 +207,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         probes.sort(key=lambda p: p[0])
         x0s = [x for _, x in probes[:n_short]]
         if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)
-            nuis, effects = _decode(probes[0][1], classes, log)
-            return Calibration(
-                names=tuple(c.name for c in classes),
-                effect_params=[{n: getattr(e, n) for n in type(e).bounds} for e in effects],
-                nuisance=dict(zip(NUISANCE, map(float, nuis), strict=True)), std={},
-                cost=probes[0][0], n_params=len(lo), success=False, x=probes[0][1])
+            return _calibration(probes[0][1], classes, log, {}, probes[0][0], False)
 
     def local(x0, nfev):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
@@ -224,15 +219,17 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         short = [local(x0, max(3, max_nfev // 4)) for x0 in x0s]
         x0s = [min(short, key=lambda r: r.cost).x]
     best = local(x0s[0], max_nfev)
-    nuis, effects = _decode(best.x, classes, log)
-    std = _std(best, log, names)
+    return _calibration(best.x, classes, log, _std(best, log, names), float(2 * best.cost),
+                        bool(best.success))
+
+
+def _calibration(x, classes, log, std, cost, success):
+    nuis, effects = _decode(x, classes, log)
     return Calibration(
         names=tuple(c.name for c in classes),
         effect_params=[{n: getattr(e, n) for n in type(e).bounds} for e in effects],
         nuisance=dict(zip(NUISANCE, map(float, nuis), strict=True)),
-        std=std, cost=float(2 * best.cost), n_params=len(best.x), success=bool(best.success),
-        x=best.x,
-    )
+        std=std, cost=cost, n_params=len(x), success=success, x=x)
 
 
 def _std(res, log, names):
