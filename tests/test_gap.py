@@ -7,6 +7,8 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sknarx.gap import compare, diagnose, order_features
 from sknarx.gap.measured import check_measured
@@ -48,6 +50,32 @@ def test_line_energy_ignores_white_noise_but_sees_a_line_in_its_order_band():
     b = bands(line)
     assert 3e-6 < b["nonsync 2.5-3.5x"] < 7e-6
     assert b.drop("nonsync 2.5-3.5x").max() < 1e-6
+
+
+@given(n=st.integers(16, 600), n_ch=st.integers(1, 5), seed=st.integers(0, 2**16),
+       omega=st.floats(20.0, 400.0))
+def test_line_energy_of_all_channels_at_once_is_each_channel_alone(n, n_ch, seed, omega):
+    from sknarx.gap.features import _line_energy
+
+    R = np.random.default_rng(seed).standard_normal((n, n_ch))
+    amps, floor = _line_energy(R, 1000.0, omega)
+    for c in range(n_ch):
+        a1, f1 = _line_energy(R[:, [c]], 1000.0, omega)
+        assert np.array_equal(amps[c], a1[0]) and floor[c] == f1[0]
+
+
+def test_features_extracted_in_the_simulation_threads_equal_those_of_the_records():
+    from sknarx.gap.calibration import SweepModel
+    from sknarx.gap.features import feature_arrays
+    from sknarx.rotor import ProbeRunout, RotorParameters
+
+    model = SweepModel(RotorParameters(), 1000.0, 700, ("xO1", "yA"), transient_s=0.3)
+    nuis, effects = np.array([1.02, 0.1, 0.99, 1.03]), (ProbeRunout(amplitude=1e-5),)
+    threaded = model.feature_arrays(SPEEDS[:4], nuis, effects)
+    serial = feature_arrays(model.records(SPEEDS[:4], nuis, effects), ["xO1", "yA"], 0.3)
+    assert threaded[0] == serial[0]
+    for a, b in zip(threaded[1:], serial[1:], strict=True):
+        assert np.array_equal(a, b)
 
 
 def test_a_fixed_frequency_line_walks_across_order_bands():

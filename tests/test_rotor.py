@@ -212,6 +212,19 @@ def test_measurement_effects_runout_and_noise():
     pd.testing.assert_frame_equal(n1, noisy.simulate(100.0, **kw))  # seeded
 
 
+def test_simulate_columns_is_simulate_without_the_dataframe():
+    # the calibration's inner loop runs on the arrays; its numbers must be the table's
+    effects = [R.MeasurementNoise(snr_db=25.0), R.ProbeRunout(amplitude=1e-5, phase=0.3),
+               R.SpeedFluctuation(amplitude=0.01, frequency=3.0)]
+    sim = R.RotorBearingSimulator(effects=effects, seed=5)
+    kw = dict(fs=1000.0, n_samples=700, settle=0.3)
+    cols = sim.simulate_columns(120.0, **kw)
+    table = sim.simulate(120.0, **kw)
+    assert list(cols) == list(table.columns)
+    pd.testing.assert_frame_equal(pd.DataFrame(cols), table, check_exact=True)
+    assert np.all(cols["speed"] == 120.0)  # the nominal speed, not the fluctuating one
+
+
 def _small_beam(kx=1e5, ky=1e5):
     from sknarx.rotor.beam import BeamRotor, Bearing, Disk
 

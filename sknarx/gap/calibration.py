@@ -21,7 +21,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
-from .features import feature_arrays
+from .features import record_features, stack_features
 from .gapmap import compare, fast_residual, gap_statistic
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
@@ -68,28 +68,37 @@ class SweepModel:
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
         releases the GIL), which halves an evaluation on two cores."""
+        return self._per_speed(speeds, nuis, effects, lambda record: record)
+
+    def _per_speed(self, speeds, nuis, effects, then):
+        """``then(record)`` of each speed's simulated record, computed in the thread
+        that simulated it (so one thread's post-processing overlaps the other's
+        integration), in the order of ``speeds``."""
         sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
         _ = sim._setup  # build once, before the threads share it
         _ = sim._lambda_max_per_speed
 
         def one(w):
             # automatic step: halved if an effect's stiff contact makes it unstable
-            run = sim.simulate(float(w), fs=self.fs, n_samples=self.n_samples, settle=0.0)
-            return float(w), run["t"].to_numpy(), run[list(self.channels)].to_numpy()
+            run = sim.simulate_columns(float(w), fs=self.fs, n_samples=self.n_samples,
+                                       settle=0.0)
+            Y = np.column_stack([run[c] for c in self.channels])
+            return then((float(w), run["t"], Y))
 
         return list(_pool().map(one, speeds))
 
     def features(self, speeds, nuis, effects=()):
         """Order features of the simulated experiment as a DataFrame."""
-        keys, vals, ses, _ = feature_arrays(self.records(speeds, nuis, effects),
-                                            list(self.channels), self.transient_s)
+        keys, vals, ses, _ = self.feature_arrays(speeds, nuis, effects)
         df = pd.DataFrame(keys, columns=["speed", "window", "channel", "feature"])
         df["re"], df["im"], df["se"] = vals.real, vals.imag, ses
         return df
 
     def feature_arrays(self, speeds, nuis, effects=()):
-        return feature_arrays(self.records(speeds, nuis, effects), list(self.channels),
-                              self.transient_s)
+        channels = list(self.channels)
+        return stack_features(self._per_speed(
+            speeds, nuis, effects,
+            lambda record: record_features(record, channels, self.transient_s)))
 
 
 @dataclass

@@ -36,27 +36,30 @@ def is_nonsync(label) -> bool:
     return str(label).startswith("nonsync")
 
 
-def _line_energy(r, fs, omega):
-    """Amplitude of spectral lines above the white floor of a residual, per order band.
+def _line_energy(R, fs, omega):
+    """Amplitude of spectral lines above the white floor of residuals, per order band.
 
-    Returns the line amplitude of each band of ``NONSYNC_BANDS`` (units of ``r``)
-    and the white-floor amplitude of one bin.
+    ``R`` holds one residual per column. Returns the line amplitudes, shape
+    ``(channels, bands)`` with the bands of ``NONSYNC_BANDS`` (units of ``R``), and the
+    white-floor amplitude of one bin per channel.
     """
-    n = r.size
+    n, n_ch = R.shape
     nb = len(NONSYNC_LABELS)
     if n < 16:
-        return np.zeros(nb), 0.0
+        return np.zeros((n_ch, nb)), np.zeros(n_ch)
     win = np.hanning(n)
-    P = np.abs(np.fft.rfft(r * win)) ** 2
+    # all channels in one transform: each column is transformed exactly as on its own
+    P = np.abs(np.fft.rfft(R * win[:, None], axis=0)) ** 2
     P = P[1:]
-    order = np.arange(1, P.size + 1) * fs / n * 2 * np.pi / max(omega, 1e-12)
-    level = np.median(P) / np.log(2.0)  # exponential distribution of white periodogram bins
-    thr = level * np.log(P.size / 1e-3)  # ~1e-3 false exceedances per record
+    order = np.arange(1, P.shape[0] + 1) * fs / n * 2 * np.pi / max(omega, 1e-12)
+    level = np.median(P, axis=0) / np.log(2.0)  # exponential law of white periodogram bins
+    thr = level * np.log(P.shape[0] / 1e-3)  # ~1e-3 false exceedances per record
     excess = np.where(P > thr, np.clip(P - level, 0.0, None), 0.0)
     band = np.searchsorted(NONSYNC_BANDS, order, side="right") - 1
-    per_band = np.bincount(band, weights=excess, minlength=nb)[:nb]
+    per_band = np.stack([np.bincount(band, weights=excess[:, c], minlength=nb)[:nb]
+                         for c in range(n_ch)])
     scale = 2.0 / (win.sum() ** 2)  # periodogram -> squared amplitude
-    return np.sqrt(per_band * scale), float(np.sqrt(level * scale))
+    return np.sqrt(per_band * scale), np.sqrt(level * scale)
 
 
 def _window_features(w, t, Y, fs, orders):
@@ -75,8 +78,46 @@ def _window_features(w, t, Y, fs, orders):
     se = np.sqrt((R**2).sum(axis=0) / dof) * np.sqrt(2.0 / n)
     k = len(orders)
     vec = coef[1 : 1 + 2 * k : 2] - 1j * coef[2 : 2 + 2 * k : 2]  # (orders, channels)
-    lines = [_line_energy(R[:, c], fs, w) for c in range(Y.shape[1])]
-    return vec, se, lines
+    return vec, se, _line_energy(R, fs, w)
+
+
+def record_features(record, channels, transient_s=0.5, orders=ORDERS):
+    """Features of one record ``(speed, t, Y)``: keys, values and standard errors (lists).
+
+    Separate from :func:`feature_arrays` so that a simulation thread can extract the
+    features of its own record while the other thread integrates.
+    """
+    w, t, Y = record
+    keys, vals, ses = [], [], []
+    labels = [ORDER_LABELS.get(k, f"{k:g}x") for k in orders]
+    fs = 1.0 / np.median(np.diff(t)) if t.size > 1 else 1.0
+    for window, mask in (("transient", t < transient_s), ("steady", t >= transient_s)):
+        if int(mask.sum()) < 32:
+            continue
+        vec, se, (amps, floor) = _window_features(w, t[mask], Y[mask], fs, orders)
+        for c, ch in enumerate(channels):
+            for i, lab in enumerate(labels):
+                keys.append((w, window, ch, lab))
+                vals.append(vec[i, c])
+                ses.append(se[c])
+            for lab, a in zip(NONSYNC_LABELS, amps[c], strict=True):
+                keys.append((w, window, ch, lab))
+                vals.append(a)
+                ses.append(floor[c])
+    return keys, vals, ses
+
+
+def stack_features(parts):
+    """Join :func:`record_features` of several records into aligned arrays.
+
+    Returns ``keys`` (list of (speed, window, channel, feature)), complex values,
+    standard errors and a boolean mask of the ``nonsync`` rows.
+    """
+    keys = [k for p in parts for k in p[0]]
+    vals = np.array([v for p in parts for v in p[1]], dtype=complex)
+    ses = np.array([v for p in parts for v in p[2]], dtype=float)
+    nons = np.array([is_nonsync(k[3]) for k in keys], dtype=bool)
+    return keys, vals, ses, nons
 
 
 def feature_arrays(records, channels, transient_s=0.5, orders=ORDERS):
@@ -86,26 +127,8 @@ def feature_arrays(records, channels, transient_s=0.5, orders=ORDERS):
     standard errors and a boolean mask of the ``nonsync`` rows, always in the same
     order for the same speeds, windows and channels.
     """
-    keys, vals, ses = [], [], []
-    labels = [ORDER_LABELS.get(k, f"{k:g}x") for k in orders]
-    for w, t, Y in records:
-        fs = 1.0 / np.median(np.diff(t)) if t.size > 1 else 1.0
-        for window, mask in (("transient", t < transient_s), ("steady", t >= transient_s)):
-            if int(mask.sum()) < 32:
-                continue
-            vec, se, lines = _window_features(w, t[mask], Y[mask], fs, orders)
-            for c, ch in enumerate(channels):
-                for i, lab in enumerate(labels):
-                    keys.append((w, window, ch, lab))
-                    vals.append(vec[i, c])
-                    ses.append(se[c])
-                amps, floor = lines[c]
-                for lab, a in zip(NONSYNC_LABELS, amps, strict=True):
-                    keys.append((w, window, ch, lab))
-                    vals.append(a)
-                    ses.append(floor)
-    nons = np.array([is_nonsync(k[3]) for k in keys])
-    return keys, np.array(vals, dtype=complex), np.array(ses), nons
+    return stack_features([record_features(r, channels, transient_s, orders)
+                           for r in records])
 
 
 def order_features(table: pd.DataFrame, channels, transient_s: float = 0.5,

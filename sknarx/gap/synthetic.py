@@ -41,7 +41,7 @@ class LineFrequency(Effect):
         for c in CHANNELS:
             if c in table:
                 table[c] = table[c] + self.amplitude * np.sin(2 * np.pi * self.frequency *
-                                                              table["t"].to_numpy())
+                                                              np.asarray(table["t"]))
         return table
 
 

@@ -79,7 +79,13 @@ class Effect:
         return omega
 
     def measure(self, table, rng):
-        """Change the recorded table (DOF columns, m) and return it."""
+        """Change the recorded columns and return them.
+
+        ``table`` maps column names (``speed``, ``t``, ``u``, ``phi`` and the DOFs, as
+        in :meth:`RotorBearingSimulator.simulate`; m, rad) to 1-D arrays. Assign new
+        arrays rather than writing into the given ones (they may be views of the
+        integrator's output). ``rng`` is seeded per speed step.
+        """
         return table
 
     # -- calibration interface -------------------------------------------------
@@ -402,7 +408,7 @@ class ProbeRunout(Effect):
         return cls(amplitude=float(x[0]), phase=float(x[1]))
 
     def measure(self, table, rng):
-        phi = table["phi"].to_numpy()
+        phi = np.asarray(table["phi"])
         for plane in self.planes:
             if "x" + plane in table:
                 table["x" + plane] = table["x" + plane] + self.amplitude * np.cos(phi + self.phase)
@@ -427,7 +433,7 @@ class MeasurementNoise(Effect):
     def measure(self, table, rng):
         for col in DOF_NAMES:
             if col in table:
-                x = table[col].to_numpy()
+                x = np.asarray(table[col])
                 ac = x - x.mean()
                 sigma = math.sqrt(np.mean(ac**2) / 10 ** (self.snr_db / 10.0))
                 table[col] = x + sigma * rng.standard_normal(x.shape)
