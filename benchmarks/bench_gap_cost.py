@@ -24,6 +24,10 @@ from sknarx.gap.synthetic import make_trial  # noqa: E402
 
 
 def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=2,
+                    help="runs of each trial (the machine is shared: the median is quoted)")
+    args = ap.parse_args()
     speeds = tuple(np.linspace(81.7, 276.5, 19).round(4))
     warm, _ = make_trial("crack", 1, speeds=speeds[:4])
     t = time.perf_counter()
@@ -31,10 +35,6 @@ def main():
         warnings.simplefilter("ignore")
         diagnose(warm, candidates=("crack",))
     compile_s = time.perf_counter() - t
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=2,
-                    help="runs of each trial (the machine is shared: the median is quoted)")
-    args = ap.parse_args()
     rows, results = [], []
     # a single effect, a dominant one, none, and a pair (the pair search runs)
     for kind, seed in (("crack", 21), ("runout", 22), (None, 23), (("runout", "crack"), 24)):

@@ -212,17 +212,22 @@ def test_measurement_effects_runout_and_noise():
     pd.testing.assert_frame_equal(n1, noisy.simulate(100.0, **kw))  # seeded
 
 
-def test_simulate_columns_is_simulate_without_the_dataframe():
-    # the calibration's inner loop runs on the arrays; its numbers must be the table's
+def test_simulate_columns_records_what_a_probe_would_at_the_nominal_speed():
+    # the calibration's inner loop runs on these arrays (simulate wraps them in a table)
     effects = [R.MeasurementNoise(snr_db=25.0), R.ProbeRunout(amplitude=1e-5, phase=0.3),
                R.SpeedFluctuation(amplitude=0.01, frequency=3.0)]
     sim = R.RotorBearingSimulator(effects=effects, seed=5)
     kw = dict(fs=1000.0, n_samples=700, settle=0.3)
     cols = sim.simulate_columns(120.0, **kw)
-    table = sim.simulate(120.0, **kw)
-    assert list(cols) == list(table.columns)
-    pd.testing.assert_frame_equal(pd.DataFrame(cols), table, check_exact=True)
+    assert list(cols) == ["speed", "t", "u", "phi", *R.DOF_NAMES]
+    assert all(v.shape == (700,) for v in cols.values())  # settling and the extra sample cut
     assert np.all(cols["speed"] == 120.0)  # the nominal speed, not the fluctuating one
+    np.testing.assert_allclose(cols["t"], np.arange(700) / 1000.0, rtol=0, atol=1e-15)
+    # the shaft angle follows the fluctuating speed, so it is not omega * t
+    assert np.max(np.abs(cols["phi"] - 120.0 * cols["t"])) > 1e-3
+    again = sim.simulate_columns(120.0, **kw)  # seeded noise: repeatable, not aliased
+    again["xO1"] = again["xO1"] + 1.0
+    np.testing.assert_array_equal(sim.simulate_columns(120.0, **kw)["xO1"], cols["xO1"])
 
 
 def _small_beam(kx=1e5, ky=1e5):
