@@ -5,8 +5,7 @@ term dictionary -> common-structure selection -> speed-scheduled model
 (:mod:`sknarx.narx`) -> reports.
 """
 
-__version__ = "0.1.0"
-
+from ._version import __version__
 from .io import model_from_json, model_to_json
 from .narx import (
     CommonStructureEFOR,

@@ -278,7 +278,7 @@ def _regions(bins, z2, noisy_rpm, thr=9.0):
 
 def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict:
     """Diagnose a 1x Bode record against the rotor of ``cfg``; writes the report files."""
-    from .. import __version__
+    from .._version import __version__
 
     rotor, info = beam_rotor_from_config(cfg)
     meas_cfg = info["measurement"]

@@ -46,7 +46,7 @@ def heatmap(cmp, path, title):
 
 
 def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None) -> dict:
-    from .. import __version__
+    from .._version import __version__
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

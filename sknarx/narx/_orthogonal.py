@@ -117,6 +117,11 @@ class EforResult:
     esr: float  # percent
     degenerate: np.ndarray  # (K, M) bool: candidates linearly dependent at the end
     stop_reason: str
+    # (K, s, s): inverse Gram matrix of the normalised selected terms, taken along the
+    # inverse Gram-Schmidt path (A^-1 diag(1/|w|^2) A^-T), selection order
+    gram_inv: np.ndarray = None
+    # (K,): squared residual norm of the normalised output after the selected terms
+    rss: np.ndarray = None
 
 
 def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResult:
@@ -146,7 +151,7 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
     limit = M if max_terms is None else min(int(max_terms), M)
     if order is not None:
         limit = len(order)
-    selected, aerr_steps, err_steps, proj = [], [], [], []
+    selected, aerr_steps, err_steps, proj, ww_steps = [], [], [], [], []
     cum = 0.0
     stop_reason = "max_terms"
     for step in range(limit):
@@ -172,6 +177,7 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
         selected.append(j)
         aerr_steps.append(aerr[j])
         err_steps.append(err[:, j])
+        ww_steps.append(ww[:, j])
         cum += aerr[j]
         alive[j] = False
         # Modified Gram-Schmidt step: project every column (and y) off w_j.
@@ -187,12 +193,15 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
     s = len(selected)
     proj = np.stack(proj, axis=1) if s else np.zeros((K, 0, width))
     coef = np.zeros((K, s))
+    gram_inv = np.zeros((K, s, s))
+    ww_sel = np.stack(ww_steps, axis=1) if s else np.zeros((K, 0))
     for k in range(K):
         A = np.eye(s)
         for i in range(s):
             A[i, i + 1 :] = proj[k, i, selected[i + 1 :]]
         g = proj[k, :, M]
         coef[k] = inverse_gram_schmidt(A, g)
+        gram_inv[k] = _inverse_gram(A, ww_sel[k])
     W = Z[:, :, :M]
     final_degenerate = (np.einsum("krm,krm->km", W, W) < tol) | dead_col
     return EforResult(
@@ -203,7 +212,24 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
         esr=100.0 - cum,
         degenerate=final_degenerate,
         stop_reason=stop_reason,
+        gram_inv=gram_inv,
+        rss=np.einsum("kr,kr->k", Z[:, :, M], Z[:, :, M]),
     )
+
+
+def _inverse_gram(A: np.ndarray, ww: np.ndarray) -> np.ndarray:
+    """``(P^T P)^-1`` of the selected terms from their Gram-Schmidt factors.
+
+    ``P = W A`` with ``W`` orthogonal columns of squared norms ``ww``, so
+    ``(P^T P)^-1 = A^-1 diag(1/ww) A^-T``: the covariance that inverse
+    Gram-Schmidt (Eq. 17) propagates from the orthogonal coefficients, whose
+    variances are ``sigma^2 / ww``. No Gram matrix is inverted.
+    """
+    s = len(ww)
+    if s == 0:
+        return np.zeros((0, 0))
+    Ainv = sla.solve_triangular(A, np.eye(s), unit_diagonal=True, check_finite=False)
+    return (Ainv / ww[None, :]) @ Ainv.T
 
 
 def inverse_gram_schmidt(A: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -223,6 +249,39 @@ def unscale(coef, norms, selected):
     """Coefficients of the raw terms from those of unit-norm terms, per dataset."""
     sel = np.asarray(selected, dtype=int)
     return coef * norms[:, -1][:, None] / np.where(norms[:, sel] > 0, norms[:, sel], 1.0)
+
+
+def coef_covariance(res: EforResult, norms: np.ndarray, n_rows) -> tuple[np.ndarray, ...]:
+    """Covariance of the raw-term coefficients of every dataset (least-squares theory).
+
+    Parameters
+    ----------
+    res : EforResult
+    norms : ndarray (K, M + 1)
+        Column norms removed by the normalisation (last: the output).
+    n_rows : array-like (K,)
+        Regression rows (samples with a complete history) of each dataset.
+
+    Returns
+    -------
+    cov : ndarray (K, s, s)
+        ``sigma_k^2 (P_k^T P_k)^-1`` in the units of the raw coefficients, with
+        ``sigma_k^2 = RSS_k / (N_k - s)`` the one-step residual variance; NaN where
+        ``N_k <= s``.
+    sigma2 : ndarray (K,)
+        Residual variance in output units squared.
+    dof : ndarray (K,)
+        ``N_k - s``.
+    """
+    sel = np.asarray(res.selected, dtype=int)
+    s = sel.size
+    n_rows = np.asarray(n_rows, dtype=float)
+    dof = n_rows - s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma2_n = np.where(dof > 0, res.rss / np.where(dof > 0, dof, 1.0), np.nan)
+    scale = norms[:, -1][:, None] / np.where(norms[:, sel] > 0, norms[:, sel], 1.0)
+    cov = sigma2_n[:, None, None] * res.gram_inv * scale[:, :, None] * scale[:, None, :]
+    return cov, sigma2_n * norms[:, -1] ** 2, dof
 
 
 def condition_numbers(Z, selected) -> np.ndarray:

@@ -10,8 +10,9 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
+from ._els import innovations, lagged
 from .sweep_data import check_series, read_sample_table
-from .terms import TermSet, monomial_exponents, n_candidate_terms, term_names
+from .terms import TermSet, monomial_exponents, n_candidate_terms, noise_term_name, term_names
 
 __all__ = ["NarxTermDictionary"]
 
@@ -31,6 +32,13 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         Largest input lag.
     degree : int, default=3
         Largest total degree of a term.
+    noise_lags : int, default=0
+        Also offer the NARMAX noise terms ``e(t-1) .. e(t-noise_lags)``: lagged
+        innovations of each record, estimated by a long linear ARX (Hannan &
+        Rissanen's first stage) on the record being transformed — they need the
+        output, like every lagged-``y`` term. A downstream
+        :class:`SpeedScheduledNarx` iterates them into prediction errors of the
+        fitted model (extended least squares). ``0``: plain NARX terms.
 
     Attributes
     ----------
@@ -38,7 +46,9 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         Exponent of each lagged variable (columns ``y(t-1..ny)``, ``u(t-1..nu)``)
         in each term (rows).
     n_terms_ : int
-        Number of candidate terms ``M``.
+        Number of candidate terms ``M`` (noise terms included).
+    innovation_order_ : int
+        Order of the long ARX that estimates the innovations (0 without noise terms).
     max_lag_ : int
         ``max(ny, nu)``: the first ``max_lag_`` samples of each dataset have no
         complete history.
@@ -78,12 +88,14 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         "ny": [Interval(Integral, 0, None, closed="left")],
         "nu": [Interval(Integral, 0, None, closed="left")],
         "degree": [Interval(Integral, 0, None, closed="left")],
+        "noise_lags": [Interval(Integral, 0, None, closed="left")],
     }
 
-    def __init__(self, ny=3, nu=3, degree=3):
+    def __init__(self, ny=3, nu=3, degree=3, noise_lags=0):
         self.ny = ny
         self.nu = nu
         self.degree = degree
+        self.noise_lags = noise_lags
 
     def fit(self, X, y=None):
         """Enumerate the terms and check ``X``.
@@ -104,8 +116,12 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
             raise ValueError("ny + nu must be at least 1 to build lagged terms.")
         self._read(X, y, record=True)
         self.exponents_ = monomial_exponents(self.ny, self.nu, self.degree)
-        self.n_terms_ = n_candidate_terms(self.ny, self.nu, self.degree)
+        self.n_terms_ = n_candidate_terms(self.ny, self.nu, self.degree) + self.noise_lags
         self.max_lag_ = max(self.ny, self.nu)
+        # A long ARX approximates the inverse noise filter; a few times the longest lag
+        # (at least 10) is the usual first-stage choice.
+        self.innovation_order_ = (max(10, 4 * max(self.ny, self.nu, self.noise_lags))
+                                  if self.noise_lags else 0)
         self.termset_ = TermSet(self.exponents_, self.ny, self.nu)
         return self
 
@@ -147,10 +163,14 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         datasets, has_speed = self._read(X, y)
         blocks, speeds = [], []
         lag = self.max_lag_
+        n_process = self.n_terms_ - self.noise_lags
         for d in datasets:
             P = np.full((len(d.y), self.n_terms_), np.nan)
             if len(d.y) > lag:
-                P[lag:] = self.termset_.evaluate(d.u, d.y, lag, len(d.y))
+                P[lag:, :n_process] = self.termset_.evaluate(d.u, d.y, lag, len(d.y))
+                if self.noise_lags:
+                    e = innovations(d.u, d.y, self.innovation_order_)
+                    P[lag:, n_process:] = lagged(e, range(1, self.noise_lags + 1))[lag:]
             blocks.append(P)
             speeds.append(np.full(len(d.y), d.speed))
         P = np.vstack(blocks)
@@ -169,7 +189,9 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         names : ndarray of str
         """
         check_is_fitted(self, "exponents_")
-        return np.asarray(term_names(self.exponents_, self.ny, self.nu), dtype=object)
+        names = term_names(self.exponents_, self.ny, self.nu)
+        names += [noise_term_name(k) for k in range(1, self.noise_lags + 1)]
+        return np.asarray(names, dtype=object)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -2,24 +2,38 @@
 
 from __future__ import annotations
 
+import json
 import warnings
+from dataclasses import dataclass
 from numbers import Integral, Real
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from numpy.polynomial import Polynomial
 from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._design import check_nan_rows, read_term_matrix
-from ._orthogonal import compress, termset_blocks
+from ._els import extended_least_squares
+from ._orthogonal import coef_covariance, compress, termset_blocks
+from ._speed_map import raw_power_map, speed_weights
+from ._state import check_document, model_state, restore_state
 from .freerun import FreeRunDivergenceError, free_run
 from .selection import compress_groups, fit_efor, warn_conditioning
 from .sweep_data import as_datasets, check_series, read_sample_table
-from .terms import TermSet, monomial_exponents, parse_terms, term_names
+from .terms import (
+    TermSet,
+    monomial_exponents,
+    noise_term_name,
+    parse_terms,
+    split_noise_terms,
+    term_names,
+)
 
-__all__ = ["SpeedScheduledNarx", "SpeedExtrapolationWarning"]
+__all__ = ["SpeedScheduledNarx", "SpeedExtrapolationWarning", "SimulationInterval"]
 
 
 def _spline(speeds, coef):
@@ -30,8 +44,97 @@ def _spline(speeds, coef):
                        bc_type="natural")
 
 
+def _sqrt_psd(C):
+    """A factor ``F`` with ``F F^T = C`` for a covariance that may be singular."""
+    lam, V = np.linalg.eigh(0.5 * (C + C.T))
+    return V * np.sqrt(np.clip(lam, 0.0, None))
+
+
+def _json_ready(x):
+    """inf/NaN as strings a reader can see (JSON has no such numbers)."""
+    if isinstance(x, dict):
+        return {k: _json_ready(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_json_ready(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return str(x)
+    return x
+
+
 class SpeedExtrapolationWarning(UserWarning):
     """A requested speed lies outside the range of the fitted speeds."""
+
+
+@dataclass
+class SimulationInterval:
+    """Monte-Carlo prediction band of a free run (see :meth:`SpeedScheduledNarx.simulate_interval`).
+
+    Attributes
+    ----------
+    y : ndarray (n_samples,)
+        Free run with the fitted coefficients (NaN after a divergence).
+    lower, upper : ndarray (n_samples,)
+        Pointwise ``(1 - level)/2`` and ``(1 + level)/2`` quantiles over the draws that
+        stayed bounded (NaN where none did).
+    level : float
+    n_draws : int
+    diverged_fraction : float
+        Share of the coefficient draws whose free run diverged: a model close to
+        instability at this speed shows it here before its nominal run does.
+    """
+
+    y: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    level: float
+    n_draws: int
+    diverged_fraction: float
+
+
+@dataclass
+class _Fit:
+    """What one fitting path hands to ``fit`` (per dataset k, term m)."""
+
+    names: list
+    coef: np.ndarray  # (K, m)
+    cov: np.ndarray  # (K, m, m)
+    sigma2: np.ndarray  # (K,)
+    dof: np.ndarray  # (K,)
+    err: np.ndarray  # (K, m) fraction
+    aerr: np.ndarray  # (m,) percent
+    esr: float  # percent
+    cond: np.ndarray  # (K,)
+    speeds: np.ndarray | None
+    n_iter: int = 0
+
+
+def _with_noise_model(fitted: _Fit, els, y_list, process=None, noise_pos=None) -> _Fit:
+    """Fold an extended-least-squares result into the fit.
+
+    Without ``process`` (``fit(datasets, speeds)``) the admitted noise terms are
+    appended after the process terms; with it (a Pipeline's term matrix) the
+    columns keep the order of ``X``: ``process`` and ``noise_pos`` (ascending lag)
+    are their positions.
+    """
+    if not els.noise_lags:  # white equation error: NARX least squares is already right
+        fitted.n_iter = els.n_iter
+        return fitted
+    yy = np.array([float(y @ y) for y in y_list])
+    esr = float(100.0 * np.mean(els.sigma2 * els.dof / yy))
+    if process is None:
+        names = fitted.names + [noise_term_name(lag) for lag in els.noise_lags]
+        return _Fit(names=names, coef=els.coef, cov=els.cov, sigma2=els.sigma2, dof=els.dof,
+                    err=np.hstack([fitted.err, els.err]),
+                    aerr=np.concatenate([fitted.aerr, 100.0 * els.err.mean(axis=0)]),
+                    esr=esr, cond=fitted.cond, speeds=fitted.speeds, n_iter=els.n_iter)
+    perm = np.asarray(list(process) + list(noise_pos))  # ELS order -> column of X
+    coef = np.empty_like(els.coef)
+    coef[:, perm] = els.coef
+    cov = np.empty_like(els.cov)
+    cov[:, perm[:, None], perm[None, :]] = els.cov
+    return _Fit(names=fitted.names, coef=coef, cov=cov, sigma2=els.sigma2, dof=els.dof,
+                err=fitted.err, aerr=fitted.aerr, esr=esr, cond=fitted.cond,
+                speeds=fitted.speeds, n_iter=els.n_iter)
 
 
 def _is_sweep(X) -> bool:
@@ -76,13 +179,25 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
     prune : bool, default=True
         Backward elimination of terms not needed to meet ``esr`` after the
         forward pass; ``False`` is the paper's method exactly.
+    noise_lags : int, default=0
+        NARMAX identification when positive: after the process terms are
+        selected, noise terms ``e(t-1) .. e(t-noise_lags)`` (a moving-average model
+        of the equation error) are admitted by a likelihood-ratio test pooled over
+        the speeds and estimated by extended least squares with prediction-error
+        refinement, iterated until the coefficients settle. This removes the bias
+        that coloured noise gives NARX least squares. ``0`` is plain NARX. In a
+        Pipeline, noise columns made by ``NarxTermDictionary(noise_lags=...)`` are
+        estimated the same way (their selection is then the selector's).
 
     Attributes
     ----------
     selected_terms_ : list of str
-        Term names in selection order.
-    exponents_ : ndarray of shape (n_terms, ny_ + nu_)
-        Exponents of the selected terms over ``y(t-1..ny_), u(t-1..nu_)``.
+        Term names in selection order; noise terms ``e(t-k)`` (NARMAX) last.
+    noise_terms_ : list of str
+        The noise terms among them (empty for a NARX model). The free run
+        (:meth:`simulate`) uses the process terms only.
+    exponents_ : ndarray of shape (n_process_terms, ny_ + nu_)
+        Exponents of the selected process terms over ``y(t-1..ny_), u(t-1..nu_)``.
     ny_, nu_ : int
         Largest lags used by the selected terms.
     aerr_ : ndarray
@@ -93,10 +208,26 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         Training speeds (rad/s), sorted as given.
     coef_per_speed_ : DataFrame (n_speeds, n_terms)
         Inverse Gram-Schmidt coefficients per training speed (the paper's Table 3).
+    coef_std_err_per_speed_ : DataFrame (n_speeds, n_terms)
+        Their standard errors: ``sigma_k^2 (P_k^T P_k)^-1`` propagated along the
+        inverse Gram-Schmidt path, with ``sigma_k^2`` the one-step residual variance
+        (for NARMAX models, the prediction-error covariance).
+    coef_cov_per_speed_ : ndarray (n_speeds, n_terms, n_terms)
+        Full covariance of each speed's coefficients (term order as above).
+    noise_variance_per_speed_ : ndarray (n_speeds,)
+        Residual (equation-error) variance per speed, in output units squared.
+    dof_per_speed_ : ndarray (n_speeds,)
+        Residual degrees of freedom per speed (regression rows minus terms).
+    n_iter_ : int
+        Extended-least-squares iterations (0 for a NARX model).
     speed_polynomials_ : DataFrame (n_terms, coef_degree + 1)
         ``beta_j`` of ``theta_m(omega) = sum_j beta_j omega^j`` (Table 4), in
         powers of omega in rad/s. Evaluation uses the better conditioned scaled
         form in ``coef_poly_``.
+    speed_polynomials_std_err_ : DataFrame (n_terms, coef_degree + 1)
+        Standard errors of ``speed_polynomials_``, propagated from the per-speed
+        covariances (the records are independent); see also
+        :meth:`bootstrap_speed_function`.
     coef_poly_ : ndarray (n_terms, coef_degree + 1)
         Coefficients in the scaled speed ``s = (2 omega - a - b) / (b - a)``.
     speed_range_ : tuple of float or None
@@ -138,6 +269,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
         "prune": ["boolean"],
+        "noise_lags": [Interval(Integral, 0, None, closed="left")],
     }
 
     def __init__(
@@ -152,6 +284,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         solver="gram",
         tol=1e-12,
         prune=True,
+        noise_lags=0,
     ):
         self.ny = ny
         self.nu = nu
@@ -163,6 +296,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.solver = solver
         self.tol = tol
         self.prune = prune
+        self.noise_lags = noise_lags
 
     # ------------------------------------------------------------------ fit
     def fit(self, X, y=None):
@@ -188,27 +322,51 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         for attr in ("n_features_in_", "feature_names_in_"):
             if hasattr(self, attr):
                 delattr(self, attr)
-        if _is_sweep(X):
-            res, coef, cond, names, speeds = self._fit_sweep(X, y)
-        else:
-            res, coef, cond, names, speeds = self._fit_terms(X, y)
-        warn_conditioning(cond, speeds)
-        self.selected_terms_ = names
-        self.aerr_ = res.aerr
-        self.esr_ = float(res.esr)
-        self.condition_number_ = float(np.max(cond))
+        fitted = self._fit_sweep(X, y) if _is_sweep(X) else self._fit_terms(X, y)
+        warn_conditioning(fitted.cond, fitted.speeds)
+        names, speeds = fitted.names, fitted.speeds
         index = pd.Index(speeds, name="speed") if speeds is not None else None
-        self.coef_per_speed_ = pd.DataFrame(coef, columns=names, index=index)
-        self.err_ = pd.DataFrame(res.err, columns=names, index=index)
+        self.selected_terms_ = names
+        self.noise_terms_ = [names[i] for i in split_noise_terms(names)[1]]
+        self.aerr_ = fitted.aerr
+        self.esr_ = float(fitted.esr)
+        self.condition_number_ = float(np.max(fitted.cond))
+        self.n_iter_ = int(fitted.n_iter)
+        self.coef_per_speed_ = pd.DataFrame(fitted.coef, columns=names, index=index)
+        self.coef_cov_per_speed_ = fitted.cov
+        std = np.sqrt(np.clip(np.einsum("kii->ki", fitted.cov), 0.0, None))
+        self.coef_std_err_per_speed_ = pd.DataFrame(std, columns=names, index=index)
+        self.noise_variance_per_speed_ = fitted.sigma2
+        self.dof_per_speed_ = fitted.dof
+        self.err_ = pd.DataFrame(fitted.err, columns=names, index=index)
         self.speeds_ = speeds
-        try:
-            self.exponents_, self.ny_, self.nu_ = parse_terms(names)
-        except ValueError:
-            self.exponents_, self.ny_, self.nu_ = None, None, None
-        self._fit_speed_polynomials(coef, speeds)
+        self._fit_speed_polynomials(fitted.coef, speeds)
         return self
 
-    def _fit_sweep(self, X, speeds):
+    @property
+    def exponents_(self):
+        """Exponents of the process terms (derived from ``selected_terms_``)."""
+        return self._parsed()[0]
+
+    @property
+    def ny_(self):
+        """Largest output lag of the process terms (None if they are not NARX terms)."""
+        return self._parsed()[1]
+
+    @property
+    def nu_(self):
+        """Largest input lag of the process terms (None if they are not NARX terms)."""
+        return self._parsed()[2]
+
+    def _parsed(self):
+        check_is_fitted(self, "selected_terms_")
+        process = split_noise_terms(self.selected_terms_)[0]
+        try:
+            return parse_terms([self.selected_terms_[i] for i in process])
+        except ValueError:
+            return None, None, None
+
+    def _fit_sweep(self, X, speeds) -> _Fit:
         datasets = as_datasets(X, speeds)
         ws = np.array([d.speed for d in datasets])
         self._check_speeds(ws)
@@ -216,7 +374,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         termset = TermSet(monomial_exponents(self.ny, self.nu, self.degree), self.ny, self.nu)
         names_all = term_names(termset.exponents, self.ny, self.nu)
         width = len(names_all) + 1
-        Zs, norms, scale = [], [], 0.0
+        Zs, norms, series, scale = [], [], [], 0.0
         for k, d in enumerate(datasets):
             where = f"Dataset {k} (speed {d.speed:g} rad/s)"
             u, yk = check_series(d.u, d.y, d.speed, lag + 2, where)
@@ -231,13 +389,26 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             Z, nrm = compress(termset_blocks(termset, u, yk, lag), width, self.solver)
             Zs.append(Z)
             norms.append(nrm)
+            series.append((u, yk))
             scale = max(scale, float(np.max(np.abs(yk))))
         self.output_scale_ = scale
-        res, coef, cond = fit_efor(np.stack(Zs), np.stack(norms), self.esr,
-                                   self.max_terms, self.tol, prune=self.prune)
-        return res, coef, cond, [names_all[j] for j in res.selected], ws
+        norms = np.stack(norms)
+        res, coef, cond = fit_efor(np.stack(Zs), norms, self.esr, self.max_terms, self.tol,
+                                   prune=self.prune)
+        n_rows = [len(yk) - lag for _, yk in series]
+        cov, sigma2, dof = coef_covariance(res, norms, n_rows)
+        fitted = _Fit(names=[names_all[j] for j in res.selected], coef=coef, cov=cov,
+                      sigma2=sigma2, dof=dof, err=res.err, aerr=res.aerr, esr=res.esr,
+                      cond=cond, speeds=ws)
+        if self.noise_lags > 0:
+            chosen = TermSet(termset.exponents[res.selected], self.ny, self.nu)
+            P_list = [chosen.evaluate(u, yk, lag, len(yk)) for u, yk in series]
+            y_list = [yk[lag:] for _, yk in series]
+            els = extended_least_squares(P_list, y_list, coef, self.noise_lags)
+            fitted = _with_noise_model(fitted, els, y_list)
+        return fitted
 
-    def _fit_terms(self, X, y):
+    def _fit_terms(self, X, y) -> _Fit:
         tm = read_term_matrix(self, X, y, "SpeedScheduledNarx")
         speeds = tm.dataset_speeds()
         if speeds is not None:
@@ -253,7 +424,24 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             ) from exc
         ok = ~np.all(np.isnan(tm.P), axis=1)
         self.output_scale_ = float(np.max(np.abs(tm.y[ok])))
-        return res, coef, cond, tm.names, speeds
+        n_rows = [int(tm.valid_rows(a, b).sum()) for a, b in tm.groups]
+        cov, sigma2, dof = coef_covariance(res, norms, n_rows)
+        fitted = _Fit(names=list(tm.names), coef=coef, cov=cov, sigma2=sigma2, dof=dof,
+                      err=res.err, aerr=res.aerr, esr=res.esr, cond=cond, speeds=speeds)
+        process, noise, lags = split_noise_terms(tm.names)
+        if noise:
+            # The dictionary's noise columns hold first-stage innovation estimates: iterate
+            # them into prediction errors of this model (extended least squares).
+            rows = [tm.valid_rows(a, b) for a, b in tm.groups]
+            P_list = [tm.P[a:b][r][:, process] for (a, b), r in zip(tm.groups, rows,
+                                                                     strict=True)]
+            y_list = [tm.y[a:b][r] for (a, b), r in zip(tm.groups, rows, strict=True)]
+            order = np.argsort(lags)
+            els = extended_least_squares(P_list, y_list, coef[:, process], max(lags),
+                                         select=False, candidates=[lags[i] for i in order])
+            fitted = _with_noise_model(fitted, els, y_list, process,
+                                       [noise[i] for i in order])
+        return fitted
 
     def _check_speeds(self, speeds):
         if not np.all(np.isfinite(speeds)):
@@ -283,6 +471,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             self.speed_range_ = None
             self.coef_poly_ = coef[:1].T.copy()
             self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names, columns=["beta0"])
+            self.speed_polynomials_std_err_ = pd.DataFrame(
+                self.coef_std_err_per_speed_.to_numpy()[:1].T, index=names, columns=["beta0"])
             return
         a, b = float(np.min(speeds)), float(np.max(speeds))
         self.speed_range_ = (a, b)
@@ -294,6 +484,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             self.coef_poly_ = coef[:1].T.copy()
             self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names,
                                                    columns=["beta0"])
+            self.speed_polynomials_std_err_ = pd.DataFrame(
+                self.coef_std_err_per_speed_.to_numpy()[:1].T, index=names, columns=["beta0"])
             return
         polys = [Polynomial.fit(speeds, coef[:, m], J, domain=[a, b]) for m in range(coef.shape[1])]
         self.coef_poly_ = np.array([np.pad(p.coef, (0, J + 1 - p.coef.size)) for p in polys])
@@ -302,21 +494,51 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.speed_polynomials_ = pd.DataFrame(
             raw, index=names, columns=[f"beta{j}" for j in range(J + 1)]
         )
+        var = self.coef_std_err_per_speed_.to_numpy() ** 2
+        self.speed_polynomials_std_err_ = pd.DataFrame(
+            np.sqrt(raw_power_map(speeds, J) ** 2 @ var).T, index=names,
+            columns=[f"beta{j}" for j in range(J + 1)]
+        )
 
     # ------------------------------------------------------------ evaluate
-    def coefficients_at(self, omega):
+    def coefficients_at(self, omega, return_std=False):
         """Coefficients ``theta(omega)`` of the selected terms.
 
         Parameters
         ----------
         omega : float or array-like of shape (n,)
             Speed(s) in rad/s.
+        return_std : bool, default=False
+            Also return the standard error of each coefficient function at
+            ``omega``, propagated from the per-speed covariances through the
+            speed basis (a pointwise band is ``theta +- 1.96 std``).
 
         Returns
         -------
         theta : ndarray of shape (n_terms,) or (n, n_terms)
+        std : ndarray of the same shape
+            Only with ``return_std=True``.
         """
         check_is_fitted(self, "coef_poly_")
+        theta = self._coefficients_at(omega)
+        if not return_std:
+            return theta
+        return theta, self._coefficient_std(omega)
+
+    def _coefficient_std(self, omega):
+        if self.coef_cov_per_speed_ is None:
+            raise ValueError(
+                "This model carries no coefficient covariance (it was read from a format-1 "
+                "model file); refit it to get standard errors."
+            )
+        w = np.asarray(omega, dtype=float)
+        var = self.coef_std_err_per_speed_.to_numpy() ** 2
+        if self.speed_range_ is None:
+            return np.array(np.broadcast_to(np.sqrt(var[0]), w.shape + (var.shape[1],)))
+        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self.coef_degree)
+        return np.sqrt(L**2 @ var).reshape(w.shape + (var.shape[1],))
+
+    def _coefficients_at(self, omega):
         w = np.asarray(omega, dtype=float)
         if self.speed_range_ is None:
             out = np.broadcast_to(self.coef_poly_[:, 0], w.shape + (self.coef_poly_.shape[0],))
@@ -331,7 +553,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 "rad/s; the coefficient polynomials are extrapolated and the model may be "
                 "inaccurate or unstable there.",
                 SpeedExtrapolationWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
         if getattr(self, "coef_spline_", None) is not None:
             return self.coef_spline_(w)
@@ -358,6 +580,28 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         -------
         y : ndarray of shape (n_samples,)
         """
+        u, w = self._check_run(u, omega)
+        process = split_noise_terms(self.selected_terms_)[0]
+        theta = np.atleast_2d(self.coefficients_at(float(w) if w.ndim == 0 else w))[:, process]
+        yhat, at = free_run(u, theta, self.exponents_, self.ny_, self.nu_, y0=y0,
+                            bound=self._bound())
+        if at >= 0:
+            wt = float(w) if w.ndim == 0 else float(w[at])
+            msg = (
+                f"The free run diverged at sample {at} (speed {wt:g} rad/s): |y| exceeded "
+                f"{self._bound():.3g}, 1000 times the largest training output. The identified "
+                "model is unstable there; add training speeds near it, lower coef_degree or the "
+                "term degree, or raise esr."
+            )
+            if on_divergence == "raise":
+                raise FreeRunDivergenceError(msg)
+            warnings.warn(msg, RuntimeWarning, stacklevel=2)
+        return yhat
+
+    def _bound(self):
+        return 1e3 * self.output_scale_ if self.output_scale_ > 0 else np.inf
+
+    def _check_run(self, u, omega):
         check_is_fitted(self, "coef_poly_")
         if self.exponents_ is None:
             raise ValueError(
@@ -371,29 +615,84 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         if not np.all(np.isfinite(u)):
             raise ValueError("u contains NaN/inf.")
         w = np.asarray(omega, dtype=float)
-        if w.ndim == 0:
-            theta = self.coefficients_at(float(w))[None, :]
-        elif w.shape == u.shape:
-            theta = self.coefficients_at(w)
-        else:
+        if w.ndim != 0 and w.shape != u.shape:
             raise ValueError(
                 f"omega must be a scalar or have one value per sample ({u.shape[0]}); got "
                 f"shape {w.shape}."
             )
-        bound = 1e3 * self.output_scale_ if self.output_scale_ > 0 else np.inf
-        yhat, at = free_run(u, theta, self.exponents_, self.ny_, self.nu_, y0=y0, bound=bound)
-        if at >= 0:
-            wt = float(w) if w.ndim == 0 else float(w[at])
-            msg = (
-                f"The free run diverged at sample {at} (speed {wt:g} rad/s): |y| exceeded "
-                f"{bound:.3g}, 1000 times the largest training output. The identified model "
-                "is unstable there; add training speeds near it, lower coef_degree or the "
-                "term degree, or raise esr."
-            )
-            if on_divergence == "raise":
-                raise FreeRunDivergenceError(msg)
-            warnings.warn(msg, RuntimeWarning, stacklevel=2)
-        return yhat
+        if not np.all(np.isfinite(w)):
+            raise ValueError("omega must be finite (rad/s).")
+        return u, w
+
+    def simulate_interval(self, u, omega, y0=None, n_draws=200, level=0.95,
+                          random_state=None):
+        """Free run with a Monte-Carlo prediction band from the coefficient uncertainty.
+
+        Each draw takes every training speed's coefficients from their estimated
+        normal distribution (``coef_per_speed_``, ``coef_cov_per_speed_``; the speeds
+        are independent records), maps them through the speed basis exactly as the
+        fit does, and free-runs the model. The band is the pointwise quantiles of
+        the draws that stayed bounded; the share that diverged is reported.
+
+        Parameters
+        ----------
+        u : array-like of shape (n_samples,)
+            Input (e.g. the unbalance force, N).
+        omega : float or array-like of shape (n_samples,)
+            Speed in rad/s, constant or one value per sample.
+        y0 : array-like of shape (max_lag,), optional
+            Initial outputs; zeros by default.
+        n_draws : int, default=200
+        level : float, default=0.95
+            Coverage of the band.
+        random_state : int, RandomState instance or None
+
+        Returns
+        -------
+        SimulationInterval
+        """
+        u, w = self._check_run(u, omega)
+        if not (isinstance(n_draws, Integral) and n_draws >= 1):
+            raise ValueError(f"n_draws must be a positive integer, got {n_draws!r}.")
+        if not 0 < level < 1:
+            raise ValueError(f"level must lie in (0, 1), got {level!r}.")
+        if self.coef_cov_per_speed_ is None:
+            self._coefficient_std(0.0)  # raises the no-covariance error
+        rng = check_random_state(random_state)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            y_nominal = self.simulate(u, float(w) if w.ndim == 0 else w, y0=y0,
+                                      on_divergence="warn")
+        process = split_noise_terms(self.selected_terms_)[0]
+        uniq, inv = np.unique(np.atleast_1d(w), return_inverse=True)
+        if self.speed_range_ is None:
+            L = np.ones((uniq.size, 1))
+        else:
+            L = speed_weights(self.speeds_, uniq, self.speed_basis, self.coef_degree)
+        Theta = self.coef_per_speed_.to_numpy()
+        chol = [_sqrt_psd(C) for C in self.coef_cov_per_speed_]
+        runs = np.full((n_draws, u.size), np.nan)
+        diverged = 0
+        for d in range(n_draws):
+            draw = np.stack([t + c @ rng.standard_normal(t.size)
+                             for t, c in zip(Theta, chol, strict=True)])
+            theta = (L @ draw)[:, process]
+            theta = theta if w.ndim == 0 else theta[inv]
+            y, at = free_run(u, theta, self.exponents_, self.ny_, self.nu_, y0=y0,
+                             bound=self._bound())
+            if at >= 0:
+                diverged += 1
+            else:
+                runs[d] = y
+        q = [(1 - level) / 2, (1 + level) / 2]
+        if diverged == n_draws:
+            warnings.warn(f"All {n_draws} coefficient draws diverged; the band is NaN.",
+                          RuntimeWarning, stacklevel=2)
+            lower = upper = np.full(u.size, np.nan)
+        else:
+            lower, upper = np.nanquantile(runs, q, axis=0)
+        return SimulationInterval(y=y_nominal, lower=lower, upper=upper, level=float(level),
+                                  n_draws=int(n_draws), diverged_fraction=diverged / n_draws)
 
     def predict(self, X):
         """Predict the output.
@@ -441,18 +740,162 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         return np.einsum("ij,ij->i", P, theta)
 
     # ---------------------------------------------------------- utilities
-    def to_json(self, path=None) -> str:
-        """Serialise the fitted model to JSON (see :func:`sknarx.io.model_to_json`)."""
-        from ..io import model_to_json
+    def score(self, X, y, sample_weight=None):
+        """Coefficient of determination R^2 of :meth:`predict`.
 
-        return model_to_json(self, path)
+        With a term matrix (Pipeline use) the prediction is one step ahead and the
+        first ``max_lag`` samples of each dataset, which have no complete history
+        (all-NaN rows), are left out; with a long sample table it is the free run.
+
+        Parameters
+        ----------
+        X : DataFrame, list of (u, y) pairs, or term matrix
+            As for :meth:`predict`.
+        y : array-like of shape (n_samples,)
+        sample_weight : array-like of shape (n_samples,), optional
+
+        Returns
+        -------
+        score : float
+        """
+        from sklearn.metrics import r2_score
+
+        y_pred = self.predict(X)
+        y = np.asarray(y, dtype=float)
+        ok = np.isfinite(y_pred)
+        w = None if sample_weight is None else np.asarray(sample_weight)[ok]
+        return float(r2_score(y[ok], y_pred[ok], sample_weight=w))
+
+    def summary(self, kind="per_speed"):
+        """Results table of the fitted model.
+
+        Parameters
+        ----------
+        kind : {'per_speed', 'speed_function'}, default='per_speed'
+            ``'per_speed'``: one row per training speed and selected term, with the
+            per-speed least-squares coefficient (not the speed function) and its
+            standard error. ``'speed_function'``: one row per term and parameter of
+            the coefficient functions: the raw-power polynomial coefficients
+            ``beta_j`` (``theta(omega) = sum_j beta_j omega^j``, omega in rad/s) for
+            ``speed_basis='polynomial'``, the knot values ``theta(omega_k)`` for
+            ``'spline'``; standard errors propagated from the per-speed covariances.
+
+        Returns
+        -------
+        table : DataFrame
+            ``per_speed`` columns: ``speed`` (rad/s), ``term``, ``kind`` (process or
+            noise), ``coef``, ``std_err``, ``t_value``, ``err`` (percent of that
+            speed's output energy the term removed at its selection step),
+            ``aerr`` (percent, averaged over speeds). ``speed_function`` columns:
+            ``term``, ``parameter``, ``value``, ``std_err``.
+        """
+        check_is_fitted(self, "coef_poly_")
+        if kind == "per_speed":
+            coef = self.coef_per_speed_
+            se = self.coef_std_err_per_speed_.to_numpy()
+            speeds = (np.full(coef.shape[0], np.nan) if self.speeds_ is None
+                      else np.asarray(self.speeds_, dtype=float))
+            noise = set(self.noise_terms_)
+            rows = []
+            for k in range(coef.shape[0]):
+                for m, term in enumerate(self.selected_terms_):
+                    c, e = float(coef.iloc[k, m]), float(se[k, m])
+                    rows.append({"speed": speeds[k], "term": term,
+                                 "kind": "noise" if term in noise else "process",
+                                 "coef": c, "std_err": e,
+                                 "t_value": c / e if e > 0 else np.nan,
+                                 "err": 100.0 * float(self.err_.iloc[k, m]),
+                                 "aerr": float(self.aerr_[m])})
+            return pd.DataFrame(rows)
+        if kind == "speed_function":
+            if self.speed_basis == "spline" and self.speeds_ is not None:
+                values = self.coef_per_speed_.to_numpy().T
+                errors = self.coef_std_err_per_speed_.to_numpy().T
+                params = [f"theta({w:g} rad/s)" for w in self.speeds_]
+            else:
+                values = self.speed_polynomials_.to_numpy()
+                errors = self.speed_polynomials_std_err_.to_numpy()
+                params = list(self.speed_polynomials_.columns)
+            rows = [{"term": term, "parameter": p, "value": float(values[m, j]),
+                     "std_err": float(errors[m, j])}
+                    for m, term in enumerate(self.selected_terms_)
+                    for j, p in enumerate(params)]
+            return pd.DataFrame(rows)
+        raise ValueError(f"kind must be 'per_speed' or 'speed_function', got {kind!r}.")
+
+    def bootstrap_speed_function(self, n_resamples=200, random_state=None):
+        """Standard errors of the speed-function parameters by a bootstrap over speeds.
+
+        The propagated errors of :meth:`summary` assume the speed function is
+        right; when the per-speed coefficients scatter about it more than their own
+        errors explain (the polynomial cannot follow them), they are too small.
+        Resampling the training speeds (whole records) with replacement and
+        refitting the speed function captures that scatter.
+
+        Parameters
+        ----------
+        n_resamples : int, default=200
+        random_state : int, RandomState instance or None
+
+        Returns
+        -------
+        table : DataFrame
+            As ``summary(kind='speed_function')``, with ``std_err`` from the
+            bootstrap (resamples with too few distinct speeds are redrawn).
+        """
+        check_is_fitted(self, "coef_poly_")
+        table = self.summary(kind="speed_function")
+        if self.speeds_ is None or len(self.speeds_) < 2:
+            raise ValueError("A bootstrap over speeds needs a model fitted at several speeds.")
+        rng = check_random_state(random_state)
+        speeds = np.asarray(self.speeds_, dtype=float)
+        Theta = self.coef_per_speed_.to_numpy()
+        K = speeds.size
+        need = 3 if self.speed_basis == "spline" else self.coef_degree + 1
+        if np.unique(speeds).size < need:
+            raise ValueError(f"{K} speeds are too few for a bootstrap of this speed basis.")
+        draws = []
+        while len(draws) < n_resamples:
+            idx = rng.randint(0, K, K)
+            uniq = np.unique(idx)
+            if uniq.size < need:
+                continue
+            if self.speed_basis == "spline":
+                L = speed_weights(speeds[uniq], speeds, "spline", 0)
+                draws.append((L @ Theta[uniq]).T)
+            else:
+                draws.append(raw_power_map(speeds[idx], self.coef_degree) @ Theta[idx])
+                draws[-1] = draws[-1].T
+        table["std_err"] = np.std(np.stack(draws), axis=0, ddof=1).reshape(-1)
+        return table
+
+    def to_json(self, path=None) -> str:
+        """Serialise the fitted model to JSON text (and write it to ``path`` if given).
+
+        The document holds the parameters, selected terms, per-speed coefficients
+        with their covariances, and the speed functions; floats round-trip exactly.
+        """
+        check_is_fitted(self, "coef_poly_")
+        text = json.dumps(_json_ready(model_state(self)), indent=1)
+        if path is not None:
+            Path(path).write_text(text)
+        return text
 
     @classmethod
     def from_json(cls, source):
-        """Rebuild a fitted model from :meth:`to_json` output (a string or a path)."""
-        from ..io import model_from_json
-
-        return model_from_json(source)
+        """Rebuild a fitted model from :meth:`to_json` output (JSON text or a path)."""
+        text = str(source)
+        if not text.lstrip().startswith("{"):
+            text = Path(source).read_text()
+        doc = json.loads(text)
+        check_document(doc)
+        model = cls(**doc["params"])
+        restore_state(model, doc)
+        model.coef_spline_ = None
+        if model.speed_basis == "spline" and model.speeds_ is not None:
+            # the spline is a deterministic function of the per-speed coefficients
+            model.coef_spline_ = _spline(model.speeds_, model.coef_per_speed_.to_numpy())
+        return model
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -20,10 +20,34 @@ __all__ = [
     "monomial_exponents",
     "term_names",
     "parse_terms",
+    "noise_term_name",
+    "split_noise_terms",
     "TermSet",
 ]
 
 _FACTOR = re.compile(r"^([yu])\(t-(\d+)\)(?:\^(\d+))?$")
+_NOISE = re.compile(r"^e\(t-(\d+)\)$")
+
+
+def noise_term_name(lag: int) -> str:
+    """Name of the noise (moving-average) term ``e(t-lag)`` of a NARMAX model."""
+    return f"e(t-{int(lag)})"
+
+
+def split_noise_terms(names) -> tuple[list[int], list[int], list[int]]:
+    """Positions of the process terms and of the noise terms ``e(t-k)``, and the noise lags.
+
+    Returns ``(process_positions, noise_positions, noise_lags)``.
+    """
+    process, noise, lags = [], [], []
+    for i, name in enumerate(names):
+        m = _NOISE.match(str(name).strip())
+        if m is None:
+            process.append(i)
+        else:
+            noise.append(i)
+            lags.append(int(m.group(1)))
+    return process, noise, lags
 
 
 def n_candidate_terms(ny: int, nu: int, degree: int) -> int:

@@ -37,7 +37,7 @@ def table4(model) -> pd.DataFrame:
 
 
 def metrics(st, command: str) -> dict:
-    from .. import __version__
+    from .._version import __version__
 
     c = st.case
     rec = st.models[RECOMMENDED]
@@ -156,7 +156,7 @@ def _html(st, m, figs) -> str:
     vt = val[["model", "speed", "nrmse", "nrmse_from_rest", "amp1x_rel_error",
               "phase1x_error_deg", "amp2x_rel_error", "phase2x_error_deg"]]
     paper_terms = ", ".join(st.models["paper"].selected_terms_)
-    from .. import __version__
+    from .._version import __version__
 
     css = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;
     color:#222}table{border-collapse:collapse;margin:0.6em 0;font-size:0.85em}

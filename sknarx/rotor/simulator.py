@@ -347,7 +347,7 @@ class RotorBearingSimulator:
 
     def settings(self, **grid) -> dict:
         """Everything that determines a sweep's numbers (stored as metadata)."""
-        from .. import __version__
+        from .._version import __version__
 
         return {
             "sknarx_version": __version__,
