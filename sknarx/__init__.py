@@ -13,11 +13,15 @@ from .narx import (
     IllConditionedWarning,
     LeaveOneSpeedOut,
     NarxTermDictionary,
+    SimulationInterval,
     SpeedExtrapolationWarning,
     SpeedScheduledNarx,
+    correlation_tests,
     free_run_nrmse,
     free_run_scorer,
     nrmse,
+    one_step_residuals,
+    validity_summary,
 )
 
 __all__ = [
@@ -32,6 +36,10 @@ __all__ = [
     "free_run_scorer",
     "free_run_nrmse",
     "nrmse",
+    "correlation_tests",
+    "validity_summary",
+    "one_step_residuals",
+    "SimulationInterval",
     "model_to_json",
     "model_from_json",
 ]

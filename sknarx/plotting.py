@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import base64
-import io
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-__all__ = ["plt", "save", "to_data_uri"]
+__all__ = ["plt", "save", "to_data_uri", "correlation_tests_figure"]
 
 plt.rcParams.update({
     "figure.dpi": 110,
@@ -39,8 +39,50 @@ def to_data_uri(path) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode()
 
 
-def png_bytes(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+_TEST_LABELS = {
+    "phi_ee": r"$\phi_{ee}(\tau)$",
+    "phi_ue": r"$\phi_{ue}(\tau)$",
+    "phi_e_eu": r"$\phi_{e(eu)}(\tau)$",
+    "phi_u2_e": r"$\phi_{u^{2\prime}e}(\tau)$",
+    "phi_u2_e2": r"$\phi_{u^{2\prime}e^2}(\tau)$",
+}
+
+
+def correlation_tests_figure(tables: dict, scope: str = "pooled"):
+    """The five correlation tests of one or more models, one row of panels per model.
+
+    Parameters
+    ----------
+    tables : dict
+        ``{label: table}`` with tables from
+        :func:`sknarx.narx.validity.correlation_tests`.
+    scope : {'pooled', 'per_speed'}
+        ``per_speed`` overlays every speed in grey.
+
+    Returns
+    -------
+    fig : matplotlib Figure
+    """
+    tests = list(_TEST_LABELS)
+    fig, axes = plt.subplots(len(tables), len(tests), figsize=(2.4 * len(tests),
+                                                              2.0 * len(tables) + 0.4),
+                             squeeze=False)
+    for row, (label, table) in zip(axes, tables.items(), strict=True):
+        part = table[table.scope == scope]
+        for ax, test in zip(row, tests, strict=True):
+            for _, g in part[part.test == test].groupby("speed", dropna=False):
+                ax.plot(g.lag, g.value, "-", lw=0.8,
+                        color="k" if scope == "pooled" else "0.4")
+                band = float(g.band.iloc[0])
+                ax.axhspan(-band, band, color="tab:blue", alpha=0.12, lw=0)
+            ax.axhline(0, color="0.5", lw=0.5)
+            sel = part[part.test == test]
+            top = max(float(np.nanmax(np.abs(sel.value))), float(sel.band.max()))
+            ax.set_ylim(-1.15 * top, 1.15 * top)  # a good model's correlations are tiny
+            ax.set_title(_TEST_LABELS[test], fontsize=9)
+            ax.set_xlabel("lag (samples)", fontsize=8)
+        row[0].set_ylabel(f"{label}\ncorrelation", fontsize=8)
+    for ax in axes.ravel():
+        ax.tick_params(labelsize=7)
+    fig.suptitle("Model validity: residual correlations (shaded: 95 % band)", fontsize=9)
+    return fig

@@ -2,16 +2,18 @@
 
 from .dictionary import NarxTermDictionary
 from .freerun import FreeRunDivergenceError
-from .scheduling import SpeedExtrapolationWarning, SpeedScheduledNarx
+from .scheduling import SimulationInterval, SpeedExtrapolationWarning, SpeedScheduledNarx
 from .scoring import free_run_nrmse, free_run_scorer, nrmse
 from .selection import CommonStructureEFOR, IllConditionedWarning
 from .splitters import LeaveOneSpeedOut
 from .terms import monomial_exponents, n_candidate_terms, parse_terms, term_names
+from .validity import correlation_tests, one_step_residuals, validity_summary
 
 __all__ = [
     "NarxTermDictionary",
     "CommonStructureEFOR",
     "SpeedScheduledNarx",
+    "SimulationInterval",
     "LeaveOneSpeedOut",
     "FreeRunDivergenceError",
     "SpeedExtrapolationWarning",
@@ -23,4 +25,7 @@ __all__ = [
     "n_candidate_terms",
     "parse_terms",
     "term_names",
+    "correlation_tests",
+    "validity_summary",
+    "one_step_residuals",
 ]

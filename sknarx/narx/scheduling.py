@@ -44,6 +44,15 @@ def _spline(speeds, coef):
                        bc_type="natural")
 
 
+def _process_structure(names):
+    """Exponents and lags of the process terms, or Nones when they are not NARX terms."""
+    process = split_noise_terms(names)[0]
+    try:
+        return parse_terms([names[i] for i in process])
+    except ValueError:
+        return None, None, None
+
+
 def _sqrt_psd(C):
     """A factor ``F`` with ``F F^T = C`` for a covariance that may be singular."""
     lam, V = np.linalg.eigh(0.5 * (C + C.T))
@@ -340,31 +349,9 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.dof_per_speed_ = fitted.dof
         self.err_ = pd.DataFrame(fitted.err, columns=names, index=index)
         self.speeds_ = speeds
+        self.exponents_, self.ny_, self.nu_ = _process_structure(names)
         self._fit_speed_polynomials(fitted.coef, speeds)
         return self
-
-    @property
-    def exponents_(self):
-        """Exponents of the process terms (derived from ``selected_terms_``)."""
-        return self._parsed()[0]
-
-    @property
-    def ny_(self):
-        """Largest output lag of the process terms (None if they are not NARX terms)."""
-        return self._parsed()[1]
-
-    @property
-    def nu_(self):
-        """Largest input lag of the process terms (None if they are not NARX terms)."""
-        return self._parsed()[2]
-
-    def _parsed(self):
-        check_is_fitted(self, "selected_terms_")
-        process = split_noise_terms(self.selected_terms_)[0]
-        try:
-            return parse_terms([self.selected_terms_[i] for i in process])
-        except ValueError:
-            return None, None, None
 
     def _fit_sweep(self, X, speeds) -> _Fit:
         datasets = as_datasets(X, speeds)
@@ -891,6 +878,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         check_document(doc)
         model = cls(**doc["params"])
         restore_state(model, doc)
+        model.exponents_, model.ny_, model.nu_ = _process_structure(model.selected_terms_)
         model.coef_spline_ = None
         if model.speed_basis == "spline" and model.speeds_ is not None:
             # the spline is a deterministic function of the per-speed coefficients

@@ -90,35 +90,48 @@ def _records(X, speeds):
     return as_datasets(X, speeds)
 
 
-def _xcorr(a, b, taus):
-    """``sum_t a(t - tau) b(t)`` for each tau (both series already centred)."""
-    n = a.size
-    out = np.empty(len(taus))
-    for i, tau in enumerate(taus):
+def _xcorr(A, b, taus):
+    """``sum_t A[i, t - tau] b(t)`` for each row ``i`` of ``A`` and each tau (centred series).
+
+    The rows that share ``b`` go through one matrix-vector product per lag.
+    """
+    n = b.size
+    out = np.empty((A.shape[0], len(taus)))
+    for j, tau in enumerate(taus):
         if tau >= 0:
-            out[i] = a[: n - tau] @ b[tau:]
+            out[:, j] = A[:, : n - tau] @ b[tau:]
         else:
-            out[i] = a[-tau:] @ b[: n + tau]
+            out[:, j] = A[:, -tau:] @ b[: n + tau]
     return out
 
 
-def _pairs(u, e, max_lag):
-    """(test, lags, a, b, shift) for the five tests on one record's aligned u and e."""
-    uc = u - u.mean()
+def _record_sums(u, e, max_lag):
+    """Cross-product sums and energies of the five tests on one record's aligned u and e.
+
+    Returns ``{test: (lags, numerator, sum a^2, sum b^2)}``.
+    """
     ec = e - e.mean()
+    uc = u - u.mean()
     u2 = u**2 - np.mean(u**2)
     e2 = e**2 - np.mean(e**2)
     eu = e * u
     eu = eu - eu.mean()
     sym = np.arange(-max_lag, max_lag + 1)
     pos = np.arange(0, max_lag + 1)
-    return [
-        ("phi_ee", np.arange(1, max_lag + 1), ec, ec, 0),
-        ("phi_ue", sym, uc, ec, 0),
-        ("phi_e_eu", pos, eu, ec, 1),  # e(t-1-tau) u(t-1-tau) with e(t)
-        ("phi_u2_e", sym, u2, ec, 0),
-        ("phi_u2_e2", sym, u2, e2, 0),
-    ]
+    A = np.stack([uc, u2, eu, ec])  # everything correlated with e(t)
+    energy = np.einsum("ij,ij->i", A, A)
+    lags_all = np.arange(-max_lag, max_lag + 2)
+    num = _xcorr(A, ec, lags_all)  # one pass for the four tests against e(t)
+    at = {int(t): j for j, t in enumerate(lags_all)}
+    ee2 = float(ec @ ec)
+    return {
+        "phi_ee": (pos[1:], num[3, [at[int(t)] for t in pos[1:]]], energy[3], ee2),
+        "phi_ue": (sym, num[0, [at[int(t)] for t in sym]], energy[0], ee2),
+        # e(t-1-tau) u(t-1-tau) with e(t): the eu series at lag tau + 1
+        "phi_e_eu": (pos, num[2, [at[int(t) + 1] for t in pos]], energy[2], ee2),
+        "phi_u2_e": (sym, num[1, [at[int(t)] for t in sym]], energy[1], ee2),
+        "phi_u2_e2": (sym, _xcorr(u2[None, :], e2, sym)[0], energy[1], float(e2 @ e2)),
+    }
 
 
 def correlation_tests(model, X, speeds=None, max_lag=20) -> pd.DataFrame:
@@ -173,14 +186,13 @@ def correlation_tests(model, X, speeds=None, max_lag=20) -> pd.DataFrame:
                 f"{max_lag}; lower max_lag."
             )
         band = 1.96 / np.sqrt(n)
-        for test, taus, a, b, shift in _pairs(u, e, max_lag):
-            num = _xcorr(a, b, taus + shift)
-            den = np.sqrt((a @ a) * (b @ b))
+        for test, (taus, num, aa, bb) in _record_sums(u, e, max_lag).items():
+            den = np.sqrt(aa * bb)
             value = num / den if den > 0 else np.full(len(taus), np.nan)
             acc = pooled.setdefault(test, [taus, 0.0, 0.0, 0.0, 0])
             acc[1] = acc[1] + num
-            acc[2] += a @ a
-            acc[3] += b @ b
+            acc[2] += aa
+            acc[3] += bb
             acc[4] += n
             rows.extend({"scope": "per_speed", "speed": float(d.speed), "test": test,
                          "lag": int(t), "value": float(v), "band": band,

@@ -40,6 +40,7 @@ class PaperCase:
     curve_speeds: tuple = tuple(np.arange(50.0, 320.0 + 1e-9, 2.0))
     runup: tuple = (80.0, 280.0, 20.0)  # from, to (rad/s), duration (s)
     bands: tuple = ((81.7, 130.0), (130.0, 180.0), (180.0, 276.5))  # Ma et al. style
+    validity_lags: int = 20  # largest lag of the residual correlation tests (samples)
     n_jobs: int = 2
     seed: int = 0
     notes: dict = field(default_factory=dict)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..orders import spectrum
-from ..plotting import plt, save
+from ..plotting import correlation_tests_figure, plt, save
 
 MODEL_STYLE = {
     "paper": dict(color="tab:red", ls="--", label="paper's method (steady data, cubic)"),
@@ -113,15 +113,32 @@ def make_figures(st, out: Path) -> dict:
     names = model.selected_terms_
     fig, axes = plt.subplots(2, 5, figsize=(12, 4.4))
     grid = np.linspace(min(c.speeds), max(c.speeds), 200)
+    cub, cub_sd = model.coefficients_at(grid, return_std=True)
+    sp, sp_sd = spl.coefficients_at(grid, return_std=True)
     for ax, term in zip(axes.ravel(), names, strict=False):
         j = names.index(term)
-        ax.plot(c.speeds, model.coef_per_speed_[term], "ko", ms=3)
-        ax.plot(grid, model.coefficients_at(grid)[:, j], "b-", lw=0.8)
-        ax.plot(grid, spl.coefficients_at(grid)[:, j], "g-", lw=0.8)
+        ax.errorbar(c.speeds, model.coef_per_speed_[term],
+                    yerr=1.96 * model.coef_std_err_per_speed_[term], fmt="ko", ms=3,
+                    elinewidth=0.6, capsize=1.5)
+        ax.plot(grid, cub[:, j], "b-", lw=0.8)
+        ax.fill_between(grid, cub[:, j] - 1.96 * cub_sd[:, j], cub[:, j] + 1.96 * cub_sd[:, j],
+                        color="b", alpha=0.15, lw=0)
+        if term in spl.selected_terms_:
+            k = spl.selected_terms_.index(term)
+            ax.plot(grid, sp[:, k], "g-", lw=0.8)
+            ax.fill_between(grid, sp[:, k] - 1.96 * sp_sd[:, k], sp[:, k] + 1.96 * sp_sd[:, k],
+                            color="g", alpha=0.15, lw=0)
         ax.set_title(term, fontsize=8)
         ax.tick_params(labelsize=6)
-    fig.suptitle("Coefficients against speed: per-speed (dots), cubic (blue), spline (green)")
+    fig.suptitle("Coefficients against speed: per-speed (dots, 95 % intervals), cubic (blue) "
+                 "and spline (green) with 95 % confidence bands", fontsize=9)
     figs["coefficients"] = save(fig, out / "coefficients_vs_speed.png")
+
+    if st.validity:
+        fig = correlation_tests_figure({_style(k)["label"]: st.validity[k]
+                                        for k in ("improved-spline", "paper")
+                                        if k in st.validity})
+        figs["validity"] = save(fig, out / "validity_tests.png")
 
     fig, ax = plt.subplots(figsize=(6, 3.4))
     for (_mode, whirl), g in st.campbell.groupby(["mode", "whirl"]):

@@ -25,6 +25,7 @@ import pandas as pd
 from ..narx.scheduling import SpeedExtrapolationWarning, SpeedScheduledNarx
 from ..narx.scoring import nrmse
 from ..narx.selection import IllConditionedWarning
+from ..narx.validity import correlation_tests
 from ..orders import order_components, spectrum
 from ..rotor import RotorBearingSimulator
 from .case import PaperCase
@@ -44,6 +45,7 @@ class Study:
     models: dict = field(default_factory=dict)
     validation: pd.DataFrame = None
     validation_traces: dict = field(default_factory=dict)
+    validity: dict = field(default_factory=dict)  # model -> correlation-test table
     cv: pd.DataFrame = None
     solver_check: dict = field(default_factory=dict)
     runup: dict = field(default_factory=dict)
@@ -178,6 +180,13 @@ def run_study(case: PaperCase = None, progress=None) -> Study:
         "max_rel_coef_diff_common": float(diff.max()),
     }
     mark("identification (AERR-EFOR, 84 candidates, 19 speeds)")
+
+    # --- model validity: residual correlation tests on each model's training records ---
+    steady_data = _records(steady, case.output)
+    for name, model in st.models.items():
+        data = steady_data if name == "paper" else rest_data
+        st.validity[name] = correlation_tests(model, data, speeds, max_lag=case.validity_lags)
+    mark("model validity tests (Billings-Voon correlations)")
 
     # --- validation at unseen speeds (Figures 8-10) ---------------------------------
     val = sim.sweep(case.validation_speeds, fs=case.fs, n_samples=case.validation_samples,
