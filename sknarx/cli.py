@@ -1,8 +1,15 @@
-"""Command line: ``sknarx paper --out DIR`` (and ``python -m sknarx paper``)."""
+"""Command line: ``sknarx paper --out DIR``, ``sknarx gap --measured FILE --out DIR``.
+
+Every mistake a user can make with their input (a missing or malformed file, wrong
+columns, an unknown option value) ends in one line that names the problem and the
+fix, with exit code 2; ``--debug`` shows the traceback instead. Progress and what
+happens go to stderr through the ``sknarx`` logger (``--verbose``/``--quiet``).
+"""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import shlex
 import sys
@@ -13,43 +20,60 @@ from pathlib import Path
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+logger = logging.getLogger("sknarx")
+
+# The names are repeated here, not imported, so that ``--help`` and option checks do not
+# import the numerical stack; a test keeps them equal to the library's.
+EFFECTS = ("rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "runout",
+           "speed-fluctuation")
+CHANNELS = ("xO1", "yO1", "xO2", "yO2", "xA", "yA", "xB", "yB")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors that point at ``--help``."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _command_line() -> str:
+    return "sknarx " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+def _check_out(path) -> Path:
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder to write the results into.")
+    return out
+
 
 def _paper(args) -> int:
+    from tqdm.auto import tqdm
+
     from .reproduce import PaperCase, run_study
     from .reproduce.report import write_outputs
 
+    out = _check_out(args.out)
     case = PaperCase(n_jobs=args.n_jobs)
     if args.quick:
         case = PaperCase(n_jobs=args.n_jobs, n_samples=8192, curve_speeds=tuple(
             range(50, 321, 10)), cv_samples=4096, validation_samples=8192)
     start = time.perf_counter()
-    steps = ["simulator", "steady sweep", "from-rest sweep", "identification", "validation",
-             "cross-validation", "run-up"]
-    bar = None
-    if not args.quiet:
-        try:
-            from tqdm.auto import tqdm
-
-            bar = tqdm(total=len(steps) + 1, desc="sknarx paper", unit="step")
-        except ImportError:  # pragma: no cover
-            bar = None
+    n_steps = 9  # the study's marked steps plus the report
+    bar = tqdm(total=n_steps, desc="sknarx paper", unit="step", file=sys.stderr,
+               disable=not logger.isEnabledFor(logging.INFO), dynamic_ncols=True)
 
     def progress(name):
-        if bar is not None:
-            bar.set_postfix_str(name[:40])
-            bar.update(1)
-        elif not args.quiet:
-            print(f"[{time.perf_counter() - start:6.1f} s] {name}", flush=True)
+        bar.set_postfix_str(name[:40])
+        bar.update(1)
+        logger.debug("[%6.1f s] %s", time.perf_counter() - start, name)
 
     study = run_study(case, progress=progress)
-    command = "sknarx " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    metrics = write_outputs(study, args.out, command)
+    metrics = write_outputs(study, out, _command_line())
     progress("figures and report")
-    if bar is not None:
-        bar.close()
-    out = Path(args.out)
+    bar.close()
     val = metrics["validation"]
-    print(f"\nWrote {out / 'report.html'} (open it first), metrics.json, figures, tables, "
+    print(f"Wrote {out / 'report.html'} (open it first), metrics.json, figures, tables, "
           "model.json")
     print(f"critical speed {metrics['critical_speed']:.1f} rad/s (paper 144.5); "
           f"{len(metrics['selected_terms'])} terms, total AERR {metrics['aerr_total']:.6f} %")
@@ -63,73 +87,116 @@ def _paper(args) -> int:
 def _gap(args) -> int:
     from .gap import diagnose, load_measured
     from .gap.report import write_gap_outputs
+    from .io import read_table
     from .rotor.config import load_config, paper_rotor_from_config
 
+    out = _check_out(args.out)
     cfg = load_config(args.rotor) if args.rotor else {}
     model = cfg.get("rotor", {}).get("model", "paper")
-    command = "sknarx " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    if model != "paper" or _is_order_domain(args.measured):
+    header = read_table(args.measured, what="measured data", nrows=1)
+    order_domain = "t" not in header.columns and any(c.startswith("amp_") for c in header)
+    if model != "paper" or order_domain:
         from .gap.orderdomain import diagnose_order_domain
 
-        doc = diagnose_order_domain(args.measured, cfg, args.out, command,
-                                    quiet=args.quiet)
+        if args.candidates or args.channels:
+            logger.warning("--candidates and --channels apply to time-series sweeps; an "
+                           "order-domain (Bode) record is diagnosed against its own library")
+        doc = diagnose_order_domain(args.measured, cfg, out, _command_line())
     else:
         from .gap.narx_view import narx_view_of
 
         base = paper_rotor_from_config(cfg)
         measured = load_measured(args.measured)
+        start = time.perf_counter()
 
         def progress(msg):
-            if not args.quiet:
-                print(f"[{time.perf_counter() - start:6.1f} s] {msg}", flush=True)
+            logger.info("[%6.1f s] %s", time.perf_counter() - start, msg)
 
-        start = time.perf_counter()
         kw = {"candidates": tuple(args.candidates)} if args.candidates else {}
         result = diagnose(measured, base=base, channels=args.channels, progress=progress, **kw)
         narx = None
-        if not args.no_narx:
+        if not args.no_narx and result["verdict"] != "no-gap":
             narx = narx_view_of(result, measured, base)
             progress("NARX view")
-        doc = write_gap_outputs(result, args.out, command, narx)
-    out = Path(args.out)
+        doc = write_gap_outputs(result, out, _command_line(), narx)
     print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %")
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
     return 0
 
 
-def _is_order_domain(path) -> bool:
-    import pandas as pd
+def _parser() -> argparse.ArgumentParser:
+    from ._version import __version__
 
-    p = Path(path)
-    if p.suffix != ".csv":
-        return False
-    cols = pd.read_csv(p, nrows=0).columns
-    return "t" not in cols and any(c.startswith("amp_") for c in cols)
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="sknarx", description="Speed-scheduled NARX models of rotor-bearing systems.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("paper", help="reproduce Jin et al. 2022, Case 1, end to end")
-    p.add_argument("--out", required=True, help="output directory (created)")
+    common = argparse.ArgumentParser(add_help=False)
+    talk = common.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true",
+                      help="say more about each step (debug-level log)")
+    talk.add_argument("-q", "--quiet", action="store_true",
+                      help="no progress bars or progress messages; warnings and the result "
+                      "only")
+    common.add_argument("--debug", action="store_true",
+                        help="show the full traceback on an error")
+    parser = _Parser(prog="sknarx", parents=[common],
+                     description="Speed-scheduled NARX models of rotor-bearing systems, and "
+                     "the sim-to-real gap of a rotor model.")
+    parser.add_argument("--version", action="version", version=f"sknarx {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    p = sub.add_parser("paper", parents=[common],
+                       help="reproduce Jin et al. 2022, Case 1, end to end")
+    p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--n-jobs", type=int, default=2, help="parallel simulation workers")
     p.add_argument("--quick", action="store_true",
                    help="short records for a fast smoke run (not the paper's settings)")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=_paper)
-    g = sub.add_parser("gap", help="diagnose the sim-to-real gap of measured data")
-    g.add_argument("--measured", required=True, help="measured data file (.csv or .parquet)")
+    g = sub.add_parser("gap", parents=[common],
+                       help="diagnose the sim-to-real gap of measured data")
+    g.add_argument("--measured", required=True,
+                   help="measured data: a .csv (comma or semicolon) or .parquet file")
     g.add_argument("--rotor", help="rotor description (.toml, .yaml or .json); default: "
                    "the paper's rotor")
-    g.add_argument("--out", required=True, help="output directory (created)")
-    g.add_argument("--channels", nargs="+", help="channels to use (default: all DOF columns)")
-    g.add_argument("--candidates", nargs="+", help="effects to search (default: the library)")
+    g.add_argument("--out", required=True, help="output folder (created)")
+    g.add_argument("--channels", nargs="+", choices=CHANNELS, metavar="CHANNEL",
+                   help=f"channels to use (default: all DOF columns); from {', '.join(CHANNELS)}")
+    g.add_argument("--candidates", nargs="+", choices=EFFECTS, metavar="EFFECT",
+                   help=f"effects to search (default: all): {', '.join(EFFECTS)}")
     g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
-    g.add_argument("--quiet", action="store_true")
     g.set_defaults(func=_gap)
-    args = parser.parse_args(argv)
-    return args.func(args)
+    return parser
+
+
+def _configure_logging(args) -> None:
+    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("sknarx: %(message)s"))
+    logger.handlers = [h for h in logger.handlers if isinstance(h, logging.NullHandler)]
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    logger.propagate = False
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit code (2 for a user error)."""
+    args = _parser().parse_args(argv)
+    _configure_logging(args)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("sknarx: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, ImportError) as exc:
+        # the library validates user input with these, and says what to fix
+        if args.debug:
+            raise
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"sknarx {args.command}: error: {message}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: say so, keep the traceback behind --debug
+        if args.debug:
+            raise
+        message = " ".join(str(exc).split())
+        print(f"sknarx {args.command}: internal error ({type(exc).__name__}: {message}); "
+              "rerun with --debug for the traceback and please report it", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

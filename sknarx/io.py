@@ -1,10 +1,76 @@
-"""Files: fitted models as JSON (exact round trip, no pickle) and JSON-safe values."""
+"""Files: tables users hand in, fitted models as JSON (exact round trip, no pickle),
+JSON-safe values."""
 
 from __future__ import annotations
 
-import numpy as np
+import csv
+import logging
+from pathlib import Path
 
-__all__ = ["model_to_json", "model_from_json", "json_safe"]
+import numpy as np
+import pandas as pd
+
+__all__ = ["read_table", "model_to_json", "model_from_json", "json_safe"]
+
+logger = logging.getLogger(__name__)
+
+TABLE_SUFFIXES = (".csv", ".parquet")
+
+
+def read_table(path, what="table", nrows=None) -> pd.DataFrame:
+    """Read a user's CSV or parquet file, with errors that name the problem and the fix.
+
+    The CSV delimiter is sniffed (``,``, ``;``, tab or ``|``), so files written by
+    spreadsheet programs in locales that use ``;`` read as they are.
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        What the file is, for messages ("measured data", "Bode file").
+    nrows : int, optional
+        Read only the header and this many rows.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        With one-line messages: no such file, a folder, an unsupported suffix, an
+        empty file, a header without rows, an unparseable CSV.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{what}: no file at {path}; check the path.")
+    if path.is_dir():
+        raise ValueError(f"{what}: {path} is a folder; give the data file inside it.")
+    if path.suffix.lower() not in TABLE_SUFFIXES:
+        raise ValueError(f"{what}: {path.name} is a {path.suffix or 'suffix-less'} file; "
+                         "save it as .csv (comma- or semicolon-separated) or .parquet.")
+    if path.stat().st_size == 0:
+        raise ValueError(f"{what}: {path} is empty; expected a header row and data rows.")
+    if path.suffix.lower() == ".parquet":
+        df = pd.read_parquet(path)
+    else:
+        with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
+            first = fh.readline()
+        try:
+            sep = csv.Sniffer().sniff(first, delimiters=",;\t|").delimiter
+        except csv.Error:
+            sep = ","
+        if sep != ",":
+            logger.debug("reading %s with delimiter %r", path, sep)
+        try:
+            df = pd.read_csv(path, sep=sep, nrows=nrows, encoding="utf-8-sig")
+        except pd.errors.ParserError as exc:
+            line = " ".join(str(exc).split())
+            raise ValueError(f"{what}: {path} is not a well-formed CSV ({line}); every row "
+                             "needs as many fields as the header.") from exc
+        except pd.errors.EmptyDataError as exc:
+            raise ValueError(f"{what}: {path} has no header row.") from exc
+    df.columns = [str(c).strip() for c in df.columns]
+    if len(df) == 0 and nrows != 0:
+        raise ValueError(f"{what}: {path} has a header ({', '.join(df.columns[:8])}) but no "
+                         "data rows.")
+    return df
 
 
 def json_safe(x):

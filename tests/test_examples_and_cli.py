@@ -32,8 +32,14 @@ def test_paper_command_quick(tmp_path):
     html = (out / "report.html").read_text()
     assert "data:image/png;base64," in html and m["sknarx_version"] in html
     for name in ("table3_terms_aerr.csv", "table4_coefficient_functions.csv", "model.json",
-                 "fig2_amplitude_curve.png", "fig10_validation_213.6.png", "runup.png"):
+                 "fig2_amplitude_curve.png", "fig10_validation_213.6.png", "runup.png",
+                 "validity_tests.png", "summary_improved-spline.csv",
+                 "speed_function_paper.csv", "validity_tests_paper.csv"):
         assert (out / name).exists(), name
+    # the model-judging outputs: validity verdicts per model, the results tables
+    assert set(m["validity_tests"]) == {"paper", "improved", "improved-spline"}
+    assert {"speed", "term", "coef", "std_err", "aerr"} <= set(m["summary_per_speed"][0])
+    assert "Judging the models" in html and "phi_ee" in html
 
 
 def test_cli_reports_bad_usage():

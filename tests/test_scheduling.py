@@ -212,7 +212,10 @@ def test_bad_speeds(sweep):
 
 def test_spline_speed_basis_interpolates_per_speed_coefficients_and_round_trips(sweep):
     data, _ = sweep
-    m = SpeedScheduledNarx(ny=2, nu=2, degree=3, esr=1e-9, coef_degree=2,
+    m = SpeedScheduledNarx(ny=2, nu=2, degree=3, esr=1e-9,
+                           speed_basis="spline").fit(data, SPEEDS)
+    with pytest.warns(UserWarning, match="does not change a speed_basis='spline'"):
+        SpeedScheduledNarx(ny=2, nu=2, degree=3, esr=1e-9, coef_degree=2,
                            speed_basis="spline").fit(data, SPEEDS)
     np.testing.assert_allclose(m.coefficients_at(SPEEDS), m.coef_per_speed_.to_numpy(),
                                rtol=1e-12, atol=1e-15)

@@ -109,7 +109,8 @@ def test_standard_errors_cover_the_truth_at_the_nominal_rate():
 def test_speed_function_errors_propagate_through_both_bases():
     data = arx_data(SPEEDS, 600, np.random.default_rng(3))
     for basis in ("polynomial", "spline"):
-        m = SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2, esr=0, coef_degree=1,
+        m = SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2, esr=0,
+                               coef_degree=1 if basis == "polynomial" else None,
                                speed_basis=basis).fit(data, SPEEDS)
         theta, std = m.coefficients_at(SPEEDS, return_std=True)
         assert std.shape == theta.shape and np.all(std > 0)
@@ -322,3 +323,39 @@ def test_narmax_side_by_side_with_sysidentpy_extended_least_squares():
     assert abs(a_ls - 0.5) > 8 * se  # biased
     assert abs(a_ours - 0.5) < 3 * se and abs(a_sid - 0.5) < 3 * se
     assert abs(a_ours - a_sid) < 3 * se
+
+
+def test_default_coef_degree_follows_the_number_of_speeds():
+    data = arx_data(SPEEDS, 300, np.random.default_rng(0))
+    one = SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2).fit(data[:1], SPEEDS[:1])
+    assert one.coef_degree_ == 0
+    two = SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2).fit(data[:2], SPEEDS[:2])
+    assert two.coef_degree_ == 1
+    four = SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2).fit(data, SPEEDS)
+    assert four.coef_degree_ == 3 and four.speed_polynomials_.shape[1] == 4
+    assert SpeedScheduledNarx.from_json(four.to_json()).coef_degree_ == 3
+    with pytest.raises(ValueError, match="at least 4 distinct speeds"):
+        SpeedScheduledNarx(ny=1, nu=1, degree=1, max_terms=2, coef_degree=3).fit(
+            data[:2], SPEEDS[:2])
+
+
+def test_set_output_default_gives_arrays_and_pandas_keeps_the_speed_index():
+    data = arx_data(SPEEDS[:2], 200, np.random.default_rng(0))
+    X = pd.concat([pd.DataFrame({"speed": w, "u": u, "y": y})
+                   for w, (u, y) in zip(SPEEDS[:2], data, strict=True)], ignore_index=True)
+    d = NarxTermDictionary(1, 1, 1)
+    assert isinstance(d.fit_transform(X), pd.DataFrame)  # unconfigured: the speed index
+    arr = d.set_output(transform="default").fit_transform(X)
+    assert isinstance(arr, np.ndarray) and arr.shape == (400, 3)
+    frame = d.set_output(transform="pandas").fit_transform(X)
+    assert frame.index.name == "speed"
+    sel = CommonStructureEFOR(max_terms=2, esr=0).set_output(transform="default")
+    assert isinstance(sel.fit(frame, X["y"]).transform(frame), np.ndarray)
+
+
+def test_top_level_imports_the_four_stages():
+    import sknarx
+
+    for name in ("RotorBearingSimulator", "NarxTermDictionary", "CommonStructureEFOR",
+                 "SpeedScheduledNarx"):
+        assert name in sknarx.__all__ and hasattr(sknarx, name)

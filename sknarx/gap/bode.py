@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..io import read_table
 from ..rotor.runup import RPM  # one definition, in the rotor layer the data flow from
 
 __all__ = ["RPM", "load_bode", "bin_bode", "runup_rate"]
@@ -19,15 +20,17 @@ def load_bode(path, measurement: dict) -> pd.DataFrame:
     """One row per revolution: speed (rad/s) and the complex 1x vector (m, 0-peak).
 
     ``measurement`` names the columns and units (see ``examples/rk4/rotor.toml``).
+    ``path`` may also be a DataFrame already read.
     """
-    df = pd.read_csv(path)
+    df = path if isinstance(path, pd.DataFrame) else read_table(path, what="Bode file")
     sc = measurement.get("speed_column", "rpm")
     ac = measurement.get("amplitude_column", "amp_1x")
     pc = measurement.get("phase_column", "phase_1x_deg")
     missing = [c for c in (sc, ac, pc) if c not in df.columns]
     if missing:
-        raise ValueError(f"The Bode file lacks column(s) {missing}; the rotor file's "
-                         "[measurement] section names the speed, amplitude and phase columns.")
+        raise ValueError(f"The Bode file lacks column(s) {missing} (found "
+                         f"{list(df.columns)[:10]}); the rotor file's [measurement] section "
+                         "names the speed, amplitude and phase columns.")
     d = df[[sc, ac, pc]].apply(pd.to_numeric, errors="coerce")
     if d.isna().any().any():
         raise ValueError("The Bode file has empty or non-numeric values; clean it first.")

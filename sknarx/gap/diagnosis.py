@@ -24,6 +24,7 @@ then frozen (see ``DiagnosisSettings``).
 
 from __future__ import annotations
 
+import logging
 import warnings
 from dataclasses import asdict
 
@@ -31,6 +32,7 @@ import numpy as np
 import pandas as pd
 from joblib import Parallel, delayed
 
+from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
 from .features import is_nonsync, order_features
@@ -38,6 +40,14 @@ from .gapmap import regions
 from .settings import DiagnosisSettings
 
 __all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
+
+logger = logging.getLogger(__name__)
+
+
+def _parallel(settings, jobs, total, desc):
+    """Run ``jobs`` on threads with a progress bar (results in submission order)."""
+    gen = Parallel(n_jobs=settings.n_jobs, prefer="threads", return_as="generator")(jobs)
+    return list(progress_bar(gen, total=total, desc=desc, unit="fit"))
 
 #: Candidate effects searched by default (measurement noise is characterised, not
 #: searched: every measurement has some).
@@ -103,7 +113,10 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     from .measured import check_measured
 
     settings = settings or DiagnosisSettings()
-    tick = progress or (lambda msg: None)
+    tick = progress or logger.info
+    unknown = [c for c in candidates if c not in EFFECTS]
+    if unknown:
+        raise ValueError(f"Unknown effect(s) {unknown}; the library has {', '.join(LIBRARY)}.")
     measured, info = check_measured(measured, channels)
     channels = info["channels"]
     base = base or RotorParameters()
@@ -170,8 +183,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        singles = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
-            delayed(run)((c,)) for c in candidates)
+        singles = _parallel(settings, (delayed(run)((c,)) for c in candidates),
+                            len(candidates), "effect candidates")
     tick("single candidates")
     ranked = _rank(singles, E0, cmp0)
     best = ranked[0] if ranked else None
@@ -226,19 +239,21 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            scores = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
-                delayed(probe_partner)(c) for c in candidates if c != lead)
+            others = [c for c in candidates if c != lead]
+            scores = _parallel(settings, (delayed(probe_partner)(c) for c in others),
+                               len(others), f"partners of {lead}")
             partners = [p for _, p in sorted(scores)[: settings.n_partners]]
-            pairs = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
-                delayed(run_pair)(c) for c in partners)
+            pairs = _parallel(settings, (delayed(run_pair)(c) for c in partners),
+                              len(partners), "pairs")
             # a pair must not take the credit for one member's convergence either (a
             # rub that found its basin only on top of a runout, a crack whose fit the
             # pair merely continued): each member of the best pair runs alone from it
             refits = []
             if pairs:
                 top = _rank(pairs, E0, cmp0)[0]
-                refits = Parallel(n_jobs=settings.n_jobs, prefer="threads")(
-                    delayed(refit_member)(top["_names"], top["_cal"].x, m) for m in (0, 1))
+                refits = _parallel(settings, (delayed(refit_member)(top["_names"],
+                                                                    top["_cal"].x, m)
+                                              for m in (0, 1)), 2, "pair members alone")
         for new in refits:
             singles = [new if old[0] == new[0] and new[2] < old[2] else old
                        for old in singles]

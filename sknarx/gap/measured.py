@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
+from ..io import read_table
 from ..rotor.parameters import DOF_NAMES
 
 __all__ = ["load_measured", "check_measured"]
@@ -15,17 +14,11 @@ TRANSLATIONAL = tuple(n for n in DOF_NAMES if not n.startswith("t"))
 
 
 def load_measured(path) -> pd.DataFrame:
-    """Read a measured long table from CSV or parquet (see ``docs/gap.md``)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"No measured data at {path}.")
-    if path.suffix == ".csv":
-        df = pd.read_csv(path)
-    elif path.suffix == ".parquet":
-        df = pd.read_parquet(path)
-    else:
-        raise ValueError(f"Measured data must be .csv or .parquet, got {path.suffix!r}.")
-    return df
+    """Read a measured long table from CSV (any common delimiter) or parquet.
+
+    See ``docs/gap.md`` for the columns; errors say what is wrong with the file.
+    """
+    return read_table(path, what="measured data")
 
 
 def check_measured(df: pd.DataFrame, channels=None):
@@ -35,9 +28,10 @@ def check_measured(df: pd.DataFrame, channels=None):
     missing = [c for c in ("speed", "t") if c not in df.columns]
     if missing:
         raise ValueError(
-            f"Measured data lack column(s) {missing}. Expected: 'speed' (rad/s), 't' (s, 0 at "
-            "the once-per-revolution reference of each speed step) and one column per "
-            f"channel named after a DOF ({', '.join(TRANSLATIONAL)}), in metres."
+            f"Measured data lack column(s) {missing} (found {list(df.columns)[:10]}). "
+            "Expected: 'speed' (rad/s), 't' (s, 0 at the once-per-revolution reference of "
+            f"each speed step) and one column per channel named after a DOF "
+            f"({', '.join(TRANSLATIONAL)}), in metres."
         )
     found = [c for c in df.columns if c in TRANSLATIONAL]
     if channels is None:
@@ -49,7 +43,8 @@ def check_measured(df: pd.DataFrame, channels=None):
     absent = [c for c in channels if c not in df.columns]
     if absent or not channels:
         raise ValueError(f"No measured channel column found (looked for {absent or 'any of '}"
-                         f"{'' if absent else ', '.join(TRANSLATIONAL)}).")
+                         f"{'' if absent else ', '.join(TRANSLATIONAL)}; found "
+                         f"{list(df.columns)[:10]}).")
     cols = ["speed", "t", *channels]
     bad = [c for c in cols if not np.all(np.isfinite(pd.to_numeric(df[c], errors="coerce")))]
     if bad:

@@ -19,17 +19,21 @@ projection); ``p`` is fitted by least squares from several starts.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._progress import progress_bar
 from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import runup_order_response, sweep_parameter
 from .bode import RPM, bin_bode, load_bode, runup_rate
 from .bode_report import figures, html_report
 
 __all__ = ["load_bode", "bin_bode", "runup_rate", "diagnose_order_domain"]
+
+logger = logging.getLogger(__name__)
 
 RTOL = 0.02  # model-form tolerance of a lumped linear rotor
 PAIR_MARGIN = 10.0  # held-out score (AIC) a pair must gain over its best member
@@ -276,7 +280,7 @@ def _regions(bins, z2, noisy_rpm, thr=9.0):
     return out
 
 
-def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict:
+def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     """Diagnose a 1x Bode record against the rotor of ``cfg``; writes the report files."""
     from .._version import __version__
 
@@ -314,6 +318,8 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     p_nom = np.log10([b0.kxx, b0.cxx])
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
     # calibrating the uncertain nominal values (isotropic bearing stiffness, damping)
+    logger.info("%d revolutions in %d speed bins; calibrating the nominal rotor (steady "
+                "response)", len(rows), n)
     p_cal, sd_cal = _fit(model, nominal, bins, train, bounds)
     sweep_note, base_choice = None, None
     if runup is not None:
@@ -328,6 +334,9 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
             E_steady = float(np.clip(evaluate(nominal, p_cal)[3][held] - 2, 0, None).sum())
             model = _Model(rotor, probe, runup, runup_until_rpm=until,
                            gyro_speed=float(crit) * RPM if crit else None)
+            logger.info("run-up at %.0f rpm/s is not quasi-steady (sweep parameter %.2f): "
+                        "calibrating the simulated, order-tracked run-up", runup["rate_rpm_s"],
+                        runup["sweep"]["sweep_parameter"])
             p_cal, sd_cal = _fit(model, nominal, bins, train, bounds)
             E_runup = float(np.clip(evaluate(nominal, p_cal)[3][held] - 2, 0, None).sum())
             base_choice = {"calibrated nominal, held-out excess": {
@@ -345,7 +354,8 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     ranking = []
     fits = {}
     cands = (_Candidate(True, False), _Candidate(False, True), _Candidate(True, True))
-    for cand in cands:
+    logger.info("fitting %d effect models to %d speed bins", len(cands), n)
+    for cand in progress_bar(cands, desc="effect models", unit="fit"):
         p, sd = _fit(model, cand, bins, train, bounds, start=start)
         coef, s_all, kcs, z2 = evaluate(cand, p)
         E = float(np.clip(z2[held] - 2, 0, None).sum())
@@ -414,6 +424,7 @@ def diagnose_order_domain(measured_path, cfg, out, command, quiet=False) -> dict
     if runup is not None:
         # the same verdict on a quasi-steady model: how much the sweep itself matters
         cand_best = next(c for c in cands if c.label == best["effect"])
+        logger.info("the verdict on a quasi-steady model, for comparison")
         # started from the quasi-steady calibration, not the run-up one
         p_q, _ = _fit(steady_model, cand_best, bins, train, bounds,
                       start=(p_steady[0][0], p_steady[0][1]))

@@ -3,7 +3,7 @@
 from .dictionary import NarxTermDictionary
 from .freerun import FreeRunDivergenceError
 from .scheduling import SimulationInterval, SpeedExtrapolationWarning, SpeedScheduledNarx
-from .scoring import free_run_nrmse, free_run_scorer, nrmse
+from .scoring import FreeRunDivergenceWarning, free_run_nrmse, free_run_scorer, nrmse
 from .selection import CommonStructureEFOR, IllConditionedWarning
 from .splitters import LeaveOneSpeedOut
 from .terms import monomial_exponents, n_candidate_terms, parse_terms, term_names
@@ -16,6 +16,7 @@ __all__ = [
     "SimulationInterval",
     "LeaveOneSpeedOut",
     "FreeRunDivergenceError",
+    "FreeRunDivergenceWarning",
     "SpeedExtrapolationWarning",
     "IllConditionedWarning",
     "free_run_scorer",

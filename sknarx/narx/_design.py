@@ -72,3 +72,16 @@ def check_nan_rows(P: np.ndarray) -> np.ndarray:
             "history may be all-NaN. Clean the input data."
         )
     return P
+
+
+def as_configured_output(estimator, frame: pd.DataFrame):
+    """The transform's DataFrame, or its plain array under ``set_output(transform="default")``.
+
+    Unconfigured, the stages pass DataFrames whose ``speed`` index tells the next stage
+    where each dataset begins; a user who asks for scikit-learn's default container gets
+    a float array (and with it one dataset: the speeds are not in an array).
+    """
+    config = getattr(estimator, "_sklearn_output_config", {})
+    if config.get("transform") == "default":
+        return frame.to_numpy()
+    return frame

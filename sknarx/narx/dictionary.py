@@ -10,6 +10,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
+from ._design import as_configured_output
 from ._els import innovations, lagged
 from .sweep_data import check_series, read_sample_table
 from .terms import TermSet, monomial_exponents, n_candidate_terms, noise_term_name, term_names
@@ -158,6 +159,7 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
         P : DataFrame of shape (n_samples, n_terms_)
             Columns named by :meth:`get_feature_names_out`; index named ``speed``
             when speeds are known; all-NaN rows where the history is incomplete.
+            A plain array after ``set_output(transform="default")``.
         """
         check_is_fitted(self, "exponents_")
         datasets, has_speed = self._read(X, y)
@@ -175,7 +177,8 @@ class NarxTermDictionary(TransformerMixin, BaseEstimator):
             speeds.append(np.full(len(d.y), d.speed))
         P = np.vstack(blocks)
         index = pd.Index(np.concatenate(speeds), name="speed") if has_speed else None
-        return pd.DataFrame(P, columns=self.get_feature_names_out(), index=index)
+        frame = pd.DataFrame(P, columns=self.get_feature_names_out(), index=index)
+        return as_configured_output(self, frame)
 
     def get_feature_names_out(self, input_features=None):
         """Term names: ``1``, ``y(t-1)``, ``u(t-2)^2``, ``y(t-1)*u(t-3)``, ...

@@ -174,8 +174,13 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         Selection stops when the error-to-signal ratio (percent) falls below it.
     max_terms : int or None, default=None
         Largest number of selected terms.
-    coef_degree : int, default=3
-        Degree of the coefficient polynomials in speed (the paper uses 3).
+    coef_degree : int or None, default=None
+        Degree of the coefficient polynomials in speed; None means 3 (the paper's),
+        or fewer when fewer than four speeds are given (``coef_degree_``).
+        With ``speed_basis='spline'`` the model's coefficients follow the spline and
+        this only sets the degree of the reported ``speed_polynomials_`` (Table 4),
+        so setting it there warns: in a grid search, search it with
+        ``speed_basis='polynomial'`` only (a list of parameter grids).
     speed_basis : {'polynomial', 'spline'}, default='polynomial'
         How coefficients depend on speed: one global least-squares polynomial of
         degree ``coef_degree`` (the paper), or a natural cubic spline through the
@@ -239,6 +244,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         :meth:`bootstrap_speed_function`.
     coef_poly_ : ndarray (n_terms, coef_degree + 1)
         Coefficients in the scaled speed ``s = (2 omega - a - b) / (b - a)``.
+    coef_degree_ : int
+        The speed-polynomial degree in force.
     speed_range_ : tuple of float or None
         ``(a, b)``: smallest and largest training speed.
     output_scale_ : float
@@ -273,7 +280,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         "degree": [Interval(Integral, 0, None, closed="left")],
         "esr": [Interval(Real, 0, 100, closed="both")],
         "max_terms": [Interval(Integral, 1, None, closed="left"), None],
-        "coef_degree": [Interval(Integral, 0, None, closed="left")],
+        "coef_degree": [Interval(Integral, 0, None, closed="left"), None],
         "speed_basis": [StrOptions({"polynomial", "spline"})],
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
@@ -288,7 +295,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         degree=3,
         esr=0.01,
         max_terms=None,
-        coef_degree=3,
+        coef_degree=None,
         speed_basis="polynomial",
         solver="gram",
         tol=1e-12,
@@ -328,11 +335,18 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self : SpeedScheduledNarx
         """
         self._validate_params()
+        if self.speed_basis == "spline" and self.coef_degree is not None:
+            warnings.warn(
+                f"coef_degree={self.coef_degree} does not change a speed_basis='spline' "
+                "model (its coefficients follow the spline); it only sets the degree of the "
+                "reported speed_polynomials_. Leave it None, or search it with "
+                "speed_basis='polynomial' only.",
+                UserWarning, stacklevel=2)
         for attr in ("n_features_in_", "feature_names_in_"):
             if hasattr(self, attr):
                 delattr(self, attr)
         fitted = self._fit_sweep(X, y) if _is_sweep(X) else self._fit_terms(X, y)
-        warn_conditioning(fitted.cond, fitted.speeds)
+        warn_conditioning(fitted.cond, fitted.speeds, self.solver)
         names, speeds = fitted.names, fitted.speeds
         index = pd.Index(speeds, name="speed") if speeds is not None else None
         self.selected_terms_ = names
@@ -349,6 +363,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.dof_per_speed_ = fitted.dof
         self.err_ = pd.DataFrame(fitted.err, columns=names, index=index)
         self.speeds_ = speeds
+        self.coef_degree_ = self._degree(1 if speeds is None else np.unique(speeds).size)
         self.exponents_, self.ny_, self.nu_ = _process_structure(names)
         self._fit_speed_polynomials(fitted.coef, speeds)
         return self
@@ -430,6 +445,15 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                                        [noise[i] for i in order])
         return fitted
 
+    def _degree(self, n_speeds=None):
+        """The speed-polynomial degree in force: ``coef_degree_`` once fitted; before,
+        ``coef_degree``, or when None 3 (the paper's) capped by the number of speeds."""
+        if n_speeds is None:
+            return self.coef_degree_
+        if self.coef_degree is None:
+            return int(max(min(3, n_speeds - 1), 0))
+        return int(self.coef_degree)
+
     def _check_speeds(self, speeds):
         if not np.all(np.isfinite(speeds)):
             raise ValueError("Speeds must be finite numbers (rad/s).")
@@ -444,10 +468,10 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 f"{speeds.size} speed(s) are too few for speed_basis='spline': at least 3 are "
                 "needed."
             )
-        if self.speed_basis == "polynomial" and speeds.size < self.coef_degree + 1:
+        if self.speed_basis == "polynomial" and speeds.size < self._degree(speeds.size) + 1:
             raise ValueError(
                 f"{speeds.size} speed(s) cannot determine coefficient polynomials of degree "
-                f"{self.coef_degree}: at least {self.coef_degree + 1} distinct speeds are "
+                f"{self._degree(speeds.size)}: at least {self._degree(speeds.size) + 1} distinct speeds are "
                 "needed. Add speeds or lower coef_degree."
             )
 
@@ -466,7 +490,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.coef_spline_ = None
         if self.speed_basis == "spline":
             self.coef_spline_ = _spline(speeds, coef)
-        J = self.coef_degree
+        J = self._degree()
         if a == b:  # a single speed (then coef_degree is 0): constant coefficients
             self.coef_poly_ = coef[:1].T.copy()
             self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names,
@@ -522,7 +546,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         var = self.coef_std_err_per_speed_.to_numpy() ** 2
         if self.speed_range_ is None:
             return np.array(np.broadcast_to(np.sqrt(var[0]), w.shape + (var.shape[1],)))
-        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self.coef_degree)
+        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self._degree())
         return np.sqrt(L**2 @ var).reshape(w.shape + (var.shape[1],))
 
     def _coefficients_at(self, omega):
@@ -655,7 +679,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         if self.speed_range_ is None:
             L = np.ones((uniq.size, 1))
         else:
-            L = speed_weights(self.speeds_, uniq, self.speed_basis, self.coef_degree)
+            L = speed_weights(self.speeds_, uniq, self.speed_basis, self._degree())
         Theta = self.coef_per_speed_.to_numpy()
         chol = [_sqrt_psd(C) for C in self.coef_cov_per_speed_]
         runs = np.full((n_draws, u.size), np.nan)
@@ -838,7 +862,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         speeds = np.asarray(self.speeds_, dtype=float)
         Theta = self.coef_per_speed_.to_numpy()
         K = speeds.size
-        need = 3 if self.speed_basis == "spline" else self.coef_degree + 1
+        need = 3 if self.speed_basis == "spline" else self._degree() + 1
         if np.unique(speeds).size < need:
             raise ValueError(f"{K} speeds are too few for a bootstrap of this speed basis.")
         draws = []
@@ -851,7 +875,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 L = speed_weights(speeds[uniq], speeds, "spline", 0)
                 draws.append((L @ Theta[uniq]).T)
             else:
-                draws.append(raw_power_map(speeds[idx], self.coef_degree) @ Theta[idx])
+                draws.append(raw_power_map(speeds[idx], self._degree()) @ Theta[idx])
                 draws[-1] = draws[-1].T
         table["std_err"] = np.std(np.stack(draws), axis=0, ddof=1).reshape(-1)
         return table
@@ -879,6 +903,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         model = cls(**doc["params"])
         restore_state(model, doc)
         model.exponents_, model.ny_, model.nu_ = _process_structure(model.selected_terms_)
+        model.coef_degree_ = model.speed_polynomials_.shape[1] - 1
         model.coef_spline_ = None
         if model.speed_basis == "spline" and model.speeds_ is not None:
             # the spline is a deterministic function of the per-speed coefficients

@@ -11,15 +11,18 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._design import check_nan_rows, read_term_matrix
+from ._design import as_configured_output, check_nan_rows, read_term_matrix
 from ._orthogonal import compress, condition_numbers, efor, matrix_blocks, unscale
 
 __all__ = ["CommonStructureEFOR", "IllConditionedWarning", "fit_efor"]
 
-#: Above this 2-norm condition number of the (column-normalised) selected
-#: regressors, the Gram solver (which squares it) may give coefficients with
-#: relative errors above ~eps * cond^2 = 1e-6.
-COND_WARN = 1e5
+#: Warn when the coefficients' expected relative round-off error exceeds this: about
+#: ``eps * cond^2`` for the Gram solver (it squares the condition number of the
+#: column-normalised selected regressors), ``eps * cond`` for TSQR. At the paper's
+#: settings (cond ~1e5) the Gram error is ~2e-6, harmless; at 10 kHz (cond ~1e9) it
+#: is of order one.
+ROUNDOFF_WARN = 1e-4
+EPS = float(np.finfo(float).eps)
 
 
 class IllConditionedWarning(UserWarning):
@@ -74,15 +77,24 @@ def fit_efor(Z, norms, esr, max_terms, tol, order=None, prune=False):
     return res, coef, cond
 
 
-def warn_conditioning(cond, speeds=None):
+def roundoff_error(cond, solver: str):
+    """Expected relative round-off error of the coefficients for a condition number."""
+    cond = np.asarray(cond, dtype=float)
+    return EPS * cond**2 if solver == "gram" else EPS * cond
+
+
+def warn_conditioning(cond, speeds=None, solver="gram"):
+    """Warn when round-off may corrupt the coefficients (see ``ROUNDOFF_WARN``)."""
     worst = int(np.argmax(cond))
-    if cond[worst] > COND_WARN:
+    error = float(roundoff_error(cond[worst], solver))
+    if error > ROUNDOFF_WARN:
         where = f" at speed {speeds[worst]:g} rad/s" if speeds is not None else ""
+        fix = ("use solver='qr', lower the sampling rate (decimate) or use fewer lags"
+               if solver == "gram" else "lower the sampling rate (decimate) or use fewer lags")
         warnings.warn(
             f"The selected regressors are ill-conditioned (condition number "
-            f"{cond[worst]:.3g}{where}). Coefficients may be inaccurate; the data are "
-            "probably oversampled: lower the sampling rate (decimate), use fewer lags, or "
-            "use solver='qr'.",
+            f"{cond[worst]:.3g}{where}): round-off may change the coefficients by about "
+            f"{100 * min(error, 1.0):.2g} %. The data are probably oversampled: {fix}.",
             IllConditionedWarning,
             stacklevel=3,
         )
@@ -188,7 +200,7 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         Z, norms = compress_groups(tm, self.solver)
         res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol, prune=self.prune)
         speeds = tm.dataset_speeds()
-        warn_conditioning(cond, speeds)
+        warn_conditioning(cond, speeds, self.solver)
         names = [tm.names[j] for j in res.selected]
         index = pd.Index(speeds, name="speed") if speeds is not None else None
         self.selected_indices_ = np.asarray(res.selected, dtype=int)
@@ -217,7 +229,7 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         arr = check_nan_rows(validate_data(self, X, reset=False, ensure_all_finite="allow-nan",
                                            dtype=np.float64))
         if isinstance(X, pd.DataFrame):
-            return X.iloc[:, self.selected_indices_]
+            return as_configured_output(self, X.iloc[:, self.selected_indices_])
         return arr[:, self.selected_indices_]
 
     def get_support(self, indices=False):

@@ -60,6 +60,8 @@ def _fit(case, data, speeds, **kw):
     params = dict(ny=case.ny, nu=case.nu, degree=case.degree, esr=case.esr,
                   max_terms=case.max_terms, coef_degree=case.coef_degree, prune=False)
     params.update(kw)
+    if params.get("speed_basis") == "spline":
+        params["coef_degree"] = None  # the spline sets the coefficients; None: Table 4 cubic
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IllConditionedWarning)
         return SpeedScheduledNarx(**params).fit(data, speeds)

@@ -15,14 +15,19 @@ def load_config(path) -> dict:
     """Parse a rotor file by its extension: .toml, .yaml/.yml or .json."""
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"No rotor file at {path}.")
+        raise FileNotFoundError(f"No rotor file at {path}; check the path.")
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give the rotor file (.toml, .yaml or .json).")
     text = path.read_text()
     if path.suffix == ".toml":
         if sys.version_info >= (3, 11):
             import tomllib
         else:  # pragma: no cover
             import tomli as tomllib
-        return tomllib.loads(text)
+        try:
+            return tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"Rotor file {path} is not valid TOML: {exc}.") from exc
     if path.suffix in (".yaml", ".yml"):
         try:
             import yaml
@@ -31,7 +36,10 @@ def load_config(path) -> dict:
                               "(or use the .toml or .json form).") from exc
         return yaml.safe_load(text)
     if path.suffix == ".json":
-        return json.loads(text)
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"Rotor file {path} is not valid JSON: {exc}.") from exc
     raise ValueError(f"Rotor files are .toml, .yaml or .json, not {path.suffix!r}.")
 
 
