@@ -468,11 +468,12 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 f"{speeds.size} speed(s) are too few for speed_basis='spline': at least 3 are "
                 "needed."
             )
-        if self.speed_basis == "polynomial" and speeds.size < self._degree(speeds.size) + 1:
+        degree = self._degree(speeds.size)
+        if self.speed_basis == "polynomial" and speeds.size < degree + 1:
             raise ValueError(
                 f"{speeds.size} speed(s) cannot determine coefficient polynomials of degree "
-                f"{self._degree(speeds.size)}: at least {self._degree(speeds.size) + 1} distinct speeds are "
-                "needed. Add speeds or lower coef_degree."
+                f"{degree}: at least {degree + 1} distinct speeds are needed. Add speeds or "
+                "lower coef_degree."
             )
 
     def _fit_speed_polynomials(self, coef, speeds):
