@@ -33,6 +33,8 @@ NUISANCE = {
     "stiffness_scale": (0.85, 1.15, "lin", 1.0),
     "damping_scale": (0.6, 1.6, "lin", 1.0),
 }
+NUISANCE_UNITS = {"unbalance_scale": "-", "unbalance_phase": "rad", "stiffness_scale": "-",
+                  "damping_scale": "-"}
 
 
 _POOL = None

@@ -55,8 +55,9 @@ def narx_view(measured, simulated, channel, base, ny=2, nu=2, degree=2, max_term
         "only_measured": [t for t in m.selected_terms_ if t not in s.selected_terms_],
         "only_simulated": [t for t in s.selected_terms_ if t not in m.selected_terms_],
         "max_relative_coefficient_difference": curves,
-        "reading": ("nonlinear terms only in the measured model ("
-                    + ", ".join(nonlinear) + "): a harmonic source the simulator lacks")
+        "reading": ("nonlinear terms selected only for the measurement ("
+                    + ", ".join(nonlinear) + "): a candidate harmonic source the simulator "
+                    "lacks; whether it matters is the gap diagnosis's call, not this view's")
         if nonlinear else "no nonlinear term is specific to the measured model",
         "_models": models,
     }

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .._progress import progress_bar
+from .._report import provenance
 from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import runup_order_response, sweep_parameter
 from .bode import RPM, bin_bode, load_bode, runup_rate
@@ -350,6 +351,8 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     coef_cal, s_cal, kcs_cal, z2_cal = evaluate(nominal, p_cal)
     E_before = float(np.clip(z2_cal[held] - 2, 0, None).sum())
     crit_cal = rotor.with_bearings(kxx=kcs_cal[0], kyy=kcs_cal[0]).natural_frequencies(2)
+    # below ~3/4 of the first critical the response is small and a runout stands out
+    slow_rpm = 0.75 * float(crit if crit else crit_cal[0] / RPM)
 
     ranking = []
     fits = {}
@@ -381,7 +384,7 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
             "heldout_gap_before": E_before, "heldout_gap_after": E,
             "shrink": 1 - E / E_before if E_before > 0 else 0.0,
             "score": E + 2.0 * (len(p) + (2 if cand.runout else 0) - 2),
-            "evidence": _evidence(cand, bins, z, s_cal, s_all, params, rows),
+            "evidence": _evidence(cand, bins, z, s_cal, s_all, params, rows, slow_rpm),
             "unbalance_kg_m": [[float(abs(u)), float(np.degrees(np.angle(u)))] for u in
                                _complex_pairs(coef)[: len(rotor.disks)]],
         })
@@ -478,20 +481,9 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
                            np.clip(z2_nom[held] - 2, 0, None).sum())},
         "split": {"bins": n, "train_bins": int(train.sum()), "heldout_bins": int(held.sum()),
                   "scheme": "alternating blocks of 3 bins of 20 rpm"},
-        "limits": [
-            "AC-coupled probes: no shaft centreline, so no static (misalignment) preload.",
-            "Only the 1x order is in the file: harmonic and sub-synchronous signatures "
-            "(crack, rub, looseness) cannot be tested.",
-            f"Above ~{noisy:.0f} rpm the 1x is ~0.03 V with tens of degrees of phase "
-            "scatter: those bins carry large standard errors and little weight.",
-            (f"The run-up ({runup['rate_rpm_s']:.0f} rpm/s) is simulated and order-tracked "
-             "like the measurement; the gyroscopic matrix is frozen at the first critical "
-             "speed, and above 1.6x that speed the steady response is used."
-             if runup is not None else "The record is treated as quasi-steady."),
-            "One probe: the support anisotropy's principal axes and the probe angle are "
-            "confounded with the split; both bearings are assumed alike.",
-        ],
+        "limits": _limits(cfg, info, bins, noisy, runup, until),
         "sknarx_version": __version__, "command": command,
+        "provenance": provenance(command),
     }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -501,18 +493,42 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     return doc
 
 
-def _evidence(cand, bins, z, s_before, s_after, params, rows):
+def _limits(cfg, info, bins, noisy, runup, until) -> list:
+    """What these data cannot tell: computed from the record and the rotor file, plus the
+    rig's own statements from its ``[report] limits``."""
+    out = list(cfg.get("report", {}).get("limits", []))
+    out.append("Only the 1x order is in the file: harmonic and sub-synchronous signatures "
+               "(crack, rub, looseness) cannot be tested.")
+    hi = bins.rpm.to_numpy() > noisy
+    if np.isfinite(noisy) and hi.any():
+        rel = float(np.median(bins.se.to_numpy()[hi] / np.abs(bins.z.to_numpy()[hi])))
+        out.append(f"Above {noisy:.0f} rpm (the rotor file's noisy_above_rpm) the median "
+                   f"standard error of a bin is {100 * rel:.0f} % of its 1x amplitude: those "
+                   "bins carry little weight.")
+    if runup is not None:
+        out.append(f"The run-up ({runup['rate_rpm_s']:.0f} rpm/s) is simulated and "
+                   "order-tracked like the measurement; the gyroscopic matrix is frozen at "
+                   f"the first critical speed, and above {until:.0f} rpm the steady response "
+                   "is used.")
+    else:
+        out.append("The record is treated as quasi-steady.")
+    if len(info["probes"]) == 1:
+        out.append("One probe: the support anisotropy's principal axes and the probe angle "
+                   "are confounded with the split; both bearings are assumed alike.")
+    return out
+
+
+def _evidence(cand, bins, z, s_before, s_after, params, rows, slow_rpm):
     ev = []
     if cand.runout:
-        low = bins.rpm < 1250
+        low = bins.rpm < slow_rpm
         frac = float(np.mean(params["runout_amplitude_m"] / np.abs(z[low.to_numpy()])))
         ev.append(f"constant 1x vector {1e6 * params['runout_amplitude_m']:.1f} um at "
                   f"{params['runout_phase_deg']:.0f} deg: {100 * frac:.0f} % of the raw 1x "
-                  "below 1250 rpm (source: 60-70 % at 1000-1200 rpm)")
+                  f"below {slow_rpm:.0f} rpm (3/4 of the first critical)")
     if cand.anisotropic:
         c1, c2 = params["critical_speeds_rpm"]
-        ev.append(f"split critical speed: {c1:.0f} and {c2:.0f} rpm (undamped, at rest; "
-                  "PROVENANCE reads the run-up's peaks as 1648 and ~1770 rpm)")
+        ev.append(f"split critical speed: {c1:.0f} and {c2:.0f} rpm (undamped, at rest)")
     err_b = np.abs(z - s_before)
     err_a = np.abs(z - s_after)
     i = int(np.argmax(err_b - err_a))

@@ -8,8 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._report import at_bound, figure, page, provenance, quantity, table
 from ..io import json_safe
-from ..plotting import plt, save, to_data_uri
+from ..plotting import plt, save
+from ..rotor import EFFECTS
+from .calibration import NUISANCE_UNITS
 from .features import NONSYNC_LABELS
 
 FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", *NONSYNC_LABELS]
@@ -46,8 +49,7 @@ def heatmap(cmp, path, title):
 
 
 def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None) -> dict:
-    from .._version import __version__
-
+    """Write ``diagnosis.json``, the figures and ``report.html``; returns the JSON document."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tables = result.get("_tables", {})
@@ -57,65 +59,129 @@ def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None)
                               "Gap map after nuisance calibration (all speeds)")
     if "after" in tables:
         figs["after"] = heatmap(tables["after"], out / "gap_map_after.png",
-                                f"Held-out gap with the verdict ({result['verdict']})")
+                                f"Held-out gap with the verdict ({_label(result['verdict'])})")
     if result["ranking"]:
         fig, ax = plt.subplots(figsize=(6, 3))
-        names = [r["effect"] if isinstance(r["effect"], str) else "+".join(r["effect"])
-                 for r in result["ranking"]]
+        names = [_label(r["effect"]) for r in result["ranking"]]
         ax.barh(names[::-1], [max(r["shrink"], 0) for r in result["ranking"]][::-1])
         ax.set(xlabel="share of the held-out gap removed", xlim=(0, 1))
         figs["ranking"] = save(fig, out / "ranking.png")
     doc = json_safe({k: v for k, v in result.items() if not k.startswith("_")})
-    doc["sknarx_version"] = __version__
+    prov = provenance(command)
+    doc["sknarx_version"] = prov["sknarx_version"]
     doc["command"] = command
+    doc["provenance"] = prov
     if narx is not None:
         doc["narx"] = json_safe(narx)
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1))
-    (out / "report.html").write_text(_html(doc, figs))
+    (out / "report.html").write_text(_html(doc, figs, prov))
     return doc
 
 
-def _html(doc, figs):
-    verdict = doc["verdict"]
-    vtxt = verdict if isinstance(verdict, str) else " + ".join(verdict)
-    def label(e):
-        return e if isinstance(e, str) else " + ".join(e)
+def _label(effect):
+    return effect if isinstance(effect, str) else " + ".join(effect)
 
-    rows = "".join(
-        f"<tr><td>{html.escape(label(r['effect']))}</td><td>{r['shrink']:.2f}</td><td>{r['heldout_gap_after']:.3g}</td>"
-        f"<td>{html.escape(json.dumps(r['params']))}</td>"
-        f"<td>{html.escape('; '.join(r['evidence']))}</td></tr>"
-        for r in doc["ranking"])
-    where = "".join(
-        f"<tr><td>{r['speed_range'][0]:.1f}-{r['speed_range'][1]:.1f}</td><td>{r['order']}</td>"
-        f"<td>{r['channel']}</td><td>{r['window']}</td><td>{100 * r['share']:.1f} %</td></tr>"
-        for r in doc["where"][:15])
-    imgs = "".join(f'<figure><img src="{to_data_uri(p)}"></figure>' for p in figs.values())
+
+def _speed_range(r):
+    lo, hi = r
+    return f"{lo:.1f} rad/s" if lo == hi else f"{lo:.1f}-{hi:.1f} rad/s"
+
+
+def effect_parameters(effect, params) -> str:
+    """Fitted parameters with units; a value on its search bound is flagged."""
+    names = [effect] if isinstance(effect, str) else list(effect)
+    groups = [params] if isinstance(effect, str) else list(params)
+    parts = []
+    for name, values in zip(names, groups, strict=False):
+        cls = EFFECTS.get(name)
+        for key, value in values.items():
+            if not isinstance(value, (int, float)):
+                parts.append(f"{key} {value}")
+                continue
+            unit = cls.units.get(key, "") if cls is not None else ""
+            text = f"{key} {quantity(value, unit)}"
+            if cls is not None and key in cls.bounds:
+                lo, hi, scale = cls.bounds[key]
+                side = at_bound(value, lo, hi, scale)
+                if side:
+                    bound = lo if side == "lower" else hi
+                    text += f" (AT {side.upper()} BOUND {quantity(bound, unit)})"
+            parts.append(text)
+        if len(names) > 1:
+            parts[-1] += f" [{name}]"
+    return "; ".join(parts)
+
+
+def _html(doc, figs, prov):
+    verdict = doc["verdict"]
+    floor = float(doc["settings"]["no_gap_per_feature"])
+    before = float(doc["gap_before"]["per_feature"])
+    n_feat = doc.get("n_heldout_features")
+    if verdict == "no-gap":
+        headline = (f"The held-out gap after nuisance calibration, {before:.3g} per feature, "
+                    f"is within the no-gap floor of {floor:.3g} (the 99 % level of "
+                    "effect-free sweeps): the nominal model explains these data.")
+    elif verdict == "unexplained":
+        headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
+                    f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
+                    f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
+                    "a nominal model further from the rig than the nuisance scalars allow.")
+    else:
+        band = doc.get("shrink_band")
+        band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
+                    if band else "")
+        headline = (f"{_label(verdict)} removes {100 * float(doc['shrink']):.0f} % of the "
+                    f"held-out gap{band_txt}; the gap was {before:.3g} per feature against "
+                    f"the no-gap floor {floor:.3g}.")
+    unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
+                 "(measured minus simulated order vectors over their standard errors) above "
+                 f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
+                 "dimensionless.")
+    where = table(
+        ([_speed_range(r["speed_range"]), r["order"], r["channel"], r["window"],
+          f"{100 * r['share']:.1f} %", quantity(r.get("max_gap_m"), "m")]
+         for r in doc["where"][:15]),
+        ["speeds", "order", "channel", "window", "share of the gap", "largest gap"],
+        empty="No speed x order x channel cell differs significantly (z^2 > 9) from the "
+              "calibrated nominal model.")
+    which = table(
+        ([_label(r["effect"]), f"{100 * r['shrink']:.0f} %",
+          quantity(r["heldout_gap_after"]), effect_parameters(r["effect"], r["params"]),
+          "; ".join(r["evidence"])] for r in doc["ranking"]),
+        ["candidate", "held-out gap removed", "held-out excess after", "fitted parameters",
+         "evidence"],
+        empty=("No candidate was fitted: the gap is within the no-gap floor, so there is "
+               "nothing for an effect to explain." if verdict == "no-gap" else
+               "No candidate was fitted."))
+    nuis = doc["nuisance"]
+    nuis_rows = [[k, quantity(v, NUISANCE_UNITS.get(k, "")),
+                  quantity(nuis.get("std", {}).get(f"nuisance.{k}",
+                                                   nuis.get("std", {}).get(k)),
+                           NUISANCE_UNITS.get(k, ""))]
+                 for k, v in nuis["calibrated"].items()]
+    noise = doc["noise"]
+    noise_rows = [[k.replace("_", " "), quantity(v, "dB" if k.endswith("_db") else "m")]
+                  for k, v in noise.items()]
     narx = ""
     if "narx" in doc:
         n = doc["narx"]
-        narx = (f"<h2>NARX view ({n['channel']})</h2><p>Measured model: "
-                f"{html.escape(', '.join(n['terms_measured']))}.<br>Simulated model: "
-                f"{html.escape(', '.join(n['terms_simulated']))}.<br>{html.escape(n['reading'])}"
-                "</p>")
-    band = doc.get("shrink_band")
-    band_txt = f" (5-95 %: {band[0]:.2f}-{band[1]:.2f})" if band else ""
-    css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
-           "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
-           "padding:3px 6px}img{max-width:100%}")
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>sknarx gap diagnosis
-</title><style>{css}</style></head><body><h1>Sim-to-real gap diagnosis</h1>
-<p>sknarx {html.escape(doc['sknarx_version'])}; command <code>{html.escape(doc['command'])}
-</code>.</p>
-<h2>Verdict: {html.escape(vtxt)}</h2>
-<p>Held-out gap removed by the verdict: <b>{100 * doc['shrink']:.0f} %</b>{band_txt}.
-Gap before (after nuisance calibration), per held-out feature:
-{doc['gap_before']['per_feature']:.3g} (noise level: about 0.7).</p>
-<h2>Where</h2><table><tr><th>speed (rad/s)</th><th>order</th><th>channel</th>
-<th>window</th><th>share of gap</th></tr>{where}</table>
-<h2>Which</h2><table><tr><th>candidate</th><th>shrink</th><th>held-out gap after</th>
-<th>calibrated parameters</th><th>evidence</th></tr>{rows}</table>
+        narx = (f"<h2>NARX view ({html.escape(n['channel'])})</h2><p>Model of the measurement: "
+                f"{html.escape(', '.join(n['terms_measured']))}.<br>Model of the simulation: "
+                f"{html.escape(', '.join(n['terms_simulated']))}.<br>"
+                f"{html.escape(n['reading'])}</p>")
+    imgs = "".join(figure(p) for p in figs.values())
+    split = doc["split"]
+    body = f"""<h2>Verdict: {html.escape(_label(verdict))}</h2><p>{html.escape(headline)}</p>
+<p class="note">{html.escape(unit_note)} Calibrated on {len(split['train_speeds'])} speeds,
+held out {len(split['heldout_speeds'])}; {len(doc['channels'])} channel(s)
+({html.escape(', '.join(doc['channels']))}), {quantity(doc['sampling']['fs_hz'], 'Hz')},
+{doc['sampling']['samples_per_step']} samples per step.</p>
+<h2>Where the model and the data disagree</h2>{where}
+<h2>Which effect explains it</h2>{which}
 {imgs}{narx}
-<h2>Nuisance calibration and noise</h2><pre>{html.escape(json.dumps(
-        {"nuisance": doc['nuisance'], "noise": doc['noise'], "split": doc['split']},
-        indent=1))}</pre></body></html>"""
+<h2>Nuisance calibration</h2>
+<p class="note">Global scalars fitted before any effect (nominal 1, phase 0); the candidates
+refit them with their own parameters.</p>
+{table(nuis_rows, ["parameter", "calibrated", "standard error"])}
+<h2>Noise, from the data</h2>{table(noise_rows, ["quantity", "value"])}"""
+    return page("Sim-to-real gap diagnosis", body, prov)

@@ -22,6 +22,7 @@ class PaperCase:
     numerically meaningless. 81,921 samples are then 82 s per speed.
     """
 
+    paper_critical_speed: float = 144.5  # the paper's response peak, rad/s (its Fig. 2)
     speeds: tuple = tuple(np.linspace(81.7, 276.5, 19).round(6))
     validation_speeds: tuple = (100.5, 138.2, 213.6)
     figure_speeds: tuple = (94.2, 144.5, 250.0)

@@ -38,14 +38,21 @@ def make_figures(st, out: Path) -> dict:
     ax.legend(fontsize=8)
     figs["fig2"] = save(fig, out / "fig2_amplitude_curve.png")
 
-    fig = plt.figure(figsize=(6.5, 4.2))
-    ax = fig.add_subplot(projection="3d")
-    for w, g in st.waterfall.groupby("speed"):
-        ax.plot(g.frequency, np.full(len(g), w), np.log10(g.amplitude * um + 1e-9), lw=0.7,
-                color="k")
-    ax.set(xlabel="frequency (Hz)", ylabel="speed (rad/s)", zlabel="log10 amplitude (mm)",
-           title="Fig. 3 - waterfall of disk O1, x")
-    ax.view_init(elev=28, azim=-60)
+    wf = st.waterfall.pivot_table(index="speed", columns="frequency", values="amplitude")
+    fig, ax = plt.subplots(figsize=(6.5, 4.0))
+    level = np.log10(wf.to_numpy() * um + 1e-12)
+    top = np.nanmax(level)
+    mesh = ax.pcolormesh(wf.columns.to_numpy(), wf.index.to_numpy(), level, shading="nearest",
+                         cmap="viridis", vmin=top - 5, vmax=top)
+    fig.colorbar(mesh, ax=ax, label="log10 amplitude (mm)")
+    w = wf.index.to_numpy()
+    for k, style in ((1, "-"), (2, "--"), (3, ":")):
+        ax.plot(k * w / (2 * np.pi), w, "w", ls=style, lw=0.8, alpha=0.8, label=f"{k}x")
+    ax.set(xlabel="frequency (Hz)", ylabel="speed (rad/s)",
+           xlim=(0, float(wf.columns.max())),
+           title="Fig. 3 - waterfall of disk O1, x (5 decades shown)")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(False)
     figs["fig3"] = save(fig, out / "fig3_waterfall.png")
 
     for n, (w, run) in zip((4, 5, 6), st.figure_runs.items(), strict=True):
@@ -140,13 +147,22 @@ def make_figures(st, out: Path) -> dict:
                                         if k in st.validity})
         figs["validity"] = save(fig, out / "validity_tests.png")
 
-    fig, ax = plt.subplots(figsize=(6, 3.4))
+    fig, ax = plt.subplots(figsize=(6, 3.6))
     for (_mode, whirl), g in st.campbell.groupby(["mode", "whirl"]):
-        ax.plot(g.speed, g.frequency, "b." if whirl == "forward" else "m.", ms=3)
-    ax.plot([0, 320], [0, 320], "k:", label="1x")
-    ax.set(ylim=(0, 1000), xlabel="speed (rad/s)", ylabel="natural frequency (rad/s)",
-           title="Campbell diagram (forward blue, backward magenta)")
-    ax.legend(fontsize=8)
+        ax.plot(g.speed, g.frequency, "b-" if whirl == "forward" else "m-", lw=1)
+    top = float(st.campbell.speed.max())
+    ax.plot([0, top], [0, top], "k:", lw=1, label="1x")
+    ax.plot([0, top], [0, 2 * top], "k--", lw=0.6, label="2x")
+    crossings = [w for w in np.atleast_1d(st.linear_critical_speeds) if w <= top]
+    ax.plot(crossings, crossings, "ro", ms=6, mfc="none",
+            label="1x crossings (critical speeds)")
+    for w in crossings:
+        ax.annotate(f"{w:.0f} rad/s", (w, w), xytext=(6, -12), textcoords="offset points",
+                    fontsize=7, color="r")
+    ax.set(ylim=(0, 1000), xlim=(0, top), xlabel="speed (rad/s)",
+           ylabel="natural frequency (rad/s)",
+           title="Campbell diagram (forward whirl blue, backward magenta)")
+    ax.legend(fontsize=7, loc="upper left")
     figs["campbell"] = save(fig, out / "campbell.png")
     return figs
 

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import html
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .._report import figure, page, provenance, table
 from ..io import json_safe
 from ..narx.validity import validity_summary
-from ..plotting import to_data_uri
+from ..rotor import RotorBearingSimulator
 from .figures import MODEL_STYLE, make_figures
 
 RECOMMENDED = "improved-spline"
@@ -48,8 +48,8 @@ def metrics(st, command: str) -> dict:
         "command": command,
         "recommended_model": RECOMMENDED,
         "critical_speed": st.critical_speed,
-        "critical_speed_paper": 144.5,
-        "critical_speed_rel_diff": st.critical_speed / 144.5 - 1,
+        "critical_speed_paper": c.paper_critical_speed,
+        "critical_speed_rel_diff": st.critical_speed / c.paper_critical_speed - 1,
         "linear_first_forward_critical_speed": float(st.linear_critical_speeds[0]),
         "selected_terms": rec.selected_terms_,
         "aerr": rec.aerr_.tolist(),
@@ -132,18 +132,23 @@ def _df_html(df, pct_cols=(), digits=3):
 
 
 def _img(figs, key, caption):
-    return (f'<figure><img src="{to_data_uri(figs[key])}" alt="{html.escape(caption)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+    return figure(figs[key], caption)
 
 
 def _html(st, m, figs) -> str:
     c = st.case
+    pc = c.paper_critical_speed
     val = st.validation
     rec = val[val.model == RECOMMENDED]
+    first = st.campbell[(st.campbell.whirl == "forward")]
+    first = first[first["mode"] == first["mode"].min()]
+    zeta = float(np.interp(st.linear_critical_speeds[0], first.speed, first.damping_ratio))
+    rotor = RotorBearingSimulator(seed=c.seed).params
+    ball_pass = rotor.n_balls * rotor.cage_ratio
     checks = [
-        ("Peak of disk O1 x amplitude within 3 % of 144.5 rad/s",
-         f"{st.critical_speed:.1f} rad/s ({100 * (st.critical_speed / 144.5 - 1):+.1f} %)",
-         abs(st.critical_speed / 144.5 - 1) < 0.03),
+        (f"Peak of disk O1 x amplitude within 3 % of the paper's {pc:g} rad/s",
+         f"{st.critical_speed:.1f} rad/s ({100 * (st.critical_speed / pc - 1):+.1f} %)",
+         abs(st.critical_speed / pc - 1) < 0.03),
         ("About ten common terms, total AERR > 99.9 %",
          f"{len(m['selected_terms'])} terms, {m['aerr_total']:.6f} %",
          len(m["selected_terms"]) >= 8 and m["aerr_total"] > 99.9),
@@ -166,21 +171,8 @@ def _html(st, m, figs) -> str:
     vt = val[["model", "speed", "nrmse", "nrmse_from_rest", "amp1x_rel_error",
               "phase1x_error_deg", "amp2x_rel_error", "phase2x_error_deg"]]
     paper_terms = ", ".join(st.models["paper"].selected_terms_)
-    from .._version import __version__
-
-    css = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;
-    color:#222}table{border-collapse:collapse;margin:0.6em 0;font-size:0.85em}
-    td,th{border:1px solid #ccc;padding:3px 7px;text-align:right}th{background:#f3f3f3}
-    td:first-child{text-align:left}.ok{color:#070;font-weight:bold}.bad{color:#b00;
-    font-weight:bold}figure{margin:1em 0}img{max-width:100%}figcaption{font-size:0.85em;
-    color:#555}code{background:#f4f4f4;padding:1px 4px}h2{border-bottom:1px solid #ddd}"""
-    return f"""<!doctype html><html><head><meta charset="utf-8">
-<title>sknarx - reproduction of Jin et al. 2022, Case 1</title><style>{css}</style></head><body>
-<h1>Frequency-sweep NARX modelling of the rotor-bearing system: reproduction</h1>
-<p>Jin, Zhu, Li, Wen, Yang, <i>Processes</i> 2022, 10(4), 679 - Case 1, end to end on the
-built-in simulator. sknarx {html.escape(__version__)}. Regenerate with
-<code>{html.escape(m['command'])}</code>. Total run time {sum(st.timings.values()):.0f} s
-(computation).</p>
+    body = f"""<p>Jin, Zhu, Li, Wen, Yang, <i>Processes</i> 2022, 10(4), 679 - Case 1, end to end
+on the built-in simulator. Total run time {sum(st.timings.values()):.0f} s (computation).</p>
 
 <h2>Summary</h2>
 <table><tr><th>acceptance point</th><th>measured</th><th></th></tr>{check_rows}</table>
@@ -195,10 +187,10 @@ Why, and what each change buys, is below.</p>
 <h2>1. The simulator (paper Section 2)</h2>
 {_img(figs, 'fig2', 'Fig. 2: amplitude-speed curve of disk O1, x (0-peak).')}
 <p>The peak of the nonlinear response is at <b>{st.critical_speed:.1f} rad/s</b> (paper:
-144.5). The undamped 1x crossing of the first forward mode (the classical critical speed)
-is lower, {st.linear_critical_speeds[0]:.1f} rad/s: with damping ratios near 0.27 the
-response peak of an unbalance-driven rotor sits well above the natural frequency. The
-model's matrices, assumptions and the cross-check against ROSS are in
+{pc:g}). The undamped 1x crossing of the first forward mode (the classical critical speed)
+is lower, {st.linear_critical_speeds[0]:.1f} rad/s: with a damping ratio of {zeta:.2f} there
+(linearised bearings) the response peak of an unbalance-driven rotor sits well above the
+natural frequency. The model's matrices, assumptions and the cross-check against ROSS are in
 <code>docs/rotor_model.md</code>.</p>
 {_img(figs, 'campbell', 'Campbell diagram of the linearised rotor.')}
 {_img(figs, 'fig3', 'Fig. 3: waterfall, log amplitude.')}
@@ -207,7 +199,7 @@ model's matrices, assumptions and the cross-check against ROSS are in
 {_img(figs, 'fig6', 'Fig. 6: response at 250 rad/s.')}
 <p>1x dominates everywhere; a 2x component (from the gravity-preloaded Hertzian bearings)
 is three to four orders below it at the disk and strongest, relative to 1x, at the bearing
-journals; the ball-pass component appears at {3.08:.2f}x.</p>
+journals; the ball-pass component appears at {ball_pass:.2f}x.</p>
 
 <h2>2. Identification (paper Section 3, Tables 3 and 4)</h2>
 <p>ny = nu = {c.ny}, degree {c.degree}: 84 candidates; {c.max_terms} terms selected
@@ -221,7 +213,8 @@ Differences from the paper's Table 3: the first three autoregressive terms agree
 paper: y(t-1), y(t-2), y(t-3)); the paper's AERR values after step 3 (1e-13 %) are at the
 level of rounding, so its later terms are not determined by the data and no implementation
 should be expected to reproduce their order; its coefficient values (~2.5e-8 for y(t-1))
-are not plausible for a displacement model (NOTES.md) and are not compared. Table 4
+are not plausible for a displacement model (a stable second-order recursion of a slowly
+sampled displacement has y(t-1) near 2, as found here) and are not compared. Table 4
 (cubic coefficient functions) is in <code>table4_coefficient_functions.csv</code>.</p>
 {_img(figs, 'coefficients', 'Per-speed coefficients and the two coefficient functions.')}
 <p><b>Conditioning.</b> The chosen regressors have condition number
@@ -285,10 +278,38 @@ and <code>noise_lags</code> (NARMAX by extended least squares) removes that bias
 </ul>
 
 <h2>Settings</h2>
-<pre>{html.escape(json.dumps(m['settings'], indent=1))}</pre>
-<p>Step timings (s): {html.escape(json.dumps({k: round(v, 2) for k, v in st.timings.items()}))}.
-Command: <code>{html.escape(m['command'])}</code>; Python {sys.version.split()[0]}.</p>
-</body></html>"""
+{_settings_table(m['settings'])}
+<h2>Step timings</h2>
+{table(([k, f"{v:.1f} s"] for k, v in st.timings.items()), ["step", "wall time"])}"""
+    return page("Frequency-sweep NARX modelling of the rotor-bearing system: reproduction",
+                body, provenance(m["command"]))
+
+
+_SETTING_UNITS = {"fs": "Hz", "sampling_rate_hz": "Hz", "settle": "s", "speeds": "rad/s",
+                  "validation_speeds": "rad/s", "figure_speeds": "rad/s",
+                  "curve_speeds": "rad/s", "paper_critical_speed": "rad/s",
+                  "bands": "rad/s", "runup": "rad/s, rad/s, s", "n_samples": "samples",
+                  "validation_samples": "samples", "cv_samples": "samples",
+                  "validity_lags": "samples"}
+
+
+def _settings_table(settings: dict) -> str:
+    """Settings as a compact table: long lists shortened to their range and count."""
+    rows = []
+    for key, value in settings.items():
+        if key == "notes" and not value:
+            continue
+        if isinstance(value, list) and len(value) > 6 and all(
+                isinstance(v, (int, float)) for v in value):
+            text = f"{len(value)} values, {min(value):g} to {max(value):g}"
+        elif isinstance(value, (list, tuple)):
+            text = json.dumps(value)
+        elif isinstance(value, dict):
+            text = ", ".join(f"{k}: {v}" for k, v in value.items()) or "-"
+        else:
+            text = str(value)
+        rows.append([key, text, _SETTING_UNITS.get(key, "")])
+    return table(rows, ["setting", "value", "unit"])
 
 
 def _judging(st, figs) -> str:
@@ -296,8 +317,8 @@ def _judging(st, figs) -> str:
     if not st.validity:
         return "<p>No validity tests were run.</p>"
     rows = []
-    for name, table in st.validity.items():
-        summ = validity_summary(table)
+    for name, tests in st.validity.items():
+        summ = validity_summary(tests)
         pooled = summ[summ.scope == "pooled"].set_index("test")
         per = summ[summ.scope == "per_speed"]
         row = {"model": name, "records": "steady" if name == "paper" else "from rest"}

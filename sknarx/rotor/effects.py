@@ -66,6 +66,7 @@ class Effect:
 
     name = "none"
     bounds: dict = {}
+    units: dict = {}  # {param: SI unit, "-" for a ratio}
     signature = ""
 
     def modify_parameters(self, params):
@@ -144,6 +145,7 @@ class Rub(Effect):
     name = "rub"
     bounds = {"clearance": (1e-4, 2e-3, "log"), "stiffness": (1e5, 1e8, "log"),
               "friction": (0.0, 0.3, "lin")}
+    units = {"clearance": "m", "stiffness": "N/m", "friction": "-"}
     signature = ("amplitude clipped near the response peak; 2x, 3x and sub-synchronous "
                  "(1/2x, 1/3x) orders where the orbit exceeds the clearance")
 
@@ -184,6 +186,7 @@ class Misalignment(Effect):
     angular: float = 0.0
     name = "misalignment"
     bounds = {"parallel": (0.0, 1e-3, "lin"), "angular": (0.0, 5e-3, "lin")}
+    units = {"parallel": "m", "angular": "rad"}
     signature = "2x at every speed (not growing with speed^2), strongest at bearing A; 1x offset"
     K_C = 1e6
     L_C = 0.1
@@ -230,6 +233,7 @@ class BreathingCrack(Effect):
     angle: float = 0.0
     name = "crack"
     bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin")}
+    units = {"depth": "- (stiffness lost, open)", "angle": "rad"}
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
     def force_kernel(self, context):
@@ -272,6 +276,7 @@ class JointLooseness(Effect):
     gap: float = 0.0
     name = "looseness"
     bounds = {"residual": (1e-4, 1.0, "log"), "gap": (0.0, 2e-5, "lin")}
+    units = {"residual": "- (joint stiffness left)", "gap": "m"}
     signature = "shift of the response peak, harmonics and subharmonics from bilinear contact"
 
     def force_kernel(self, context):
@@ -307,6 +312,7 @@ class SupportAnisotropy(Effect):
     ky: float = 2e7
     name = "anisotropy"
     bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log")}
+    units = {"kx": "N/m", "ky": "N/m"}
     signature = "split critical speed: x and y 1x peaks at different speeds, elliptic orbits"
 
     def force_kernel(self, context):
@@ -355,6 +361,7 @@ class ClearanceChange(Effect):
     clearance: float = 5e-6
     name = "clearance"
     bounds = {"clearance": (5e-7, 5e-5, "log")}
+    units = {"clearance": "m"}
     signature = "2x and ball-pass (3.08x) growth at the journals; response peak shift"
 
     def modify_parameters(self, params):
@@ -375,6 +382,7 @@ class SpeedFluctuation(Effect):
     phase: float = 0.0
     name = "speed-fluctuation"
     bounds = {"amplitude": (0.0, 0.05, "lin"), "frequency": (0.2, 20.0, "log")}
+    units = {"amplitude": "- (of the speed)", "frequency": "Hz"}
     signature = "non-synchronous sidebands around 1x; 1x amplitude reduced"
 
     @classmethod
@@ -401,6 +409,7 @@ class ProbeRunout(Effect):
     planes: tuple = ("O1", "A", "O2", "B")
     name = "runout"
     bounds = {"amplitude": (0.0, 1e-4, "lin"), "phase": (-math.pi, math.pi, "lin")}
+    units = {"amplitude": "m", "phase": "rad"}
     signature = "a constant 1x vector, dominant at low speed"
 
     @classmethod
@@ -428,6 +437,7 @@ class MeasurementNoise(Effect):
     snr_db: float = 30.0
     name = "noise"
     bounds = {"snr_db": (0.0, 60.0, "lin")}
+    units = {"snr_db": "dB"}
     signature = "broadband non-synchronous floor"
 
     def measure(self, table, rng):
