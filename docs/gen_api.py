@@ -5,25 +5,31 @@ Run: python docs/gen_api.py   (the test suite runs it too, so it cannot rot)
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from pathlib import Path
 
-import sknarx
-import sknarx.rotor
+#: Every public module: the package root and each module a user imports by name.
+MODULES = ("sknarx", "sknarx.rotor", "sknarx.gap", "sknarx.datasets", "sknarx.reproduce",
+           "sknarx.narx.validity", "sknarx.io", "sknarx.orders", "sknarx.plotting")
 
 OUT = Path(__file__).resolve().parent / "api.md"
 
 
 def _doc(obj) -> str:
-    return inspect.cleandoc(obj.__doc__ or "(undocumented)")
+    # getdoc follows the class hierarchy, so an override documents itself by its base
+    return inspect.getdoc(obj) or "(undocumented)"
 
 
 def render() -> str:
     parts = ["# API reference", "", "Generated from the docstrings by `docs/gen_api.py`.", ""]
-    for mod in (sknarx, sknarx.rotor):
+    for mod in map(importlib.import_module, MODULES):
         parts += [f"## `{mod.__name__}`", "", _doc(mod), ""]
         for name in mod.__all__:
             obj = getattr(mod, name)
+            if mod.__name__ != "sknarx" and getattr(obj, "__module__", "").startswith(
+                    "sknarx") and name in getattr(__import__("sknarx"), "__all__", ()):
+                continue  # documented once, under the package root
             if name.startswith("__") or not (inspect.isclass(obj) or inspect.isfunction(obj)):
                 continue
             try:

@@ -4,7 +4,30 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["order_components", "spectrum"]
+__all__ = ["order_components", "harmonic_basis", "spectrum"]
+
+
+def harmonic_basis(phi, orders) -> np.ndarray:
+    """Least-squares basis ``[1, cos(k phi), sin(k phi), ...]`` of shaft orders.
+
+    Parameters
+    ----------
+    phi : ndarray (n,)
+        Shaft angle, rad.
+    orders : sequence of float
+        Orders ``k`` (1 = once per revolution).
+
+    Returns
+    -------
+    B : ndarray (n, 1 + 2 len(orders))
+    """
+    phi = np.asarray(phi, dtype=float)
+    B = np.empty((phi.size, 1 + 2 * len(orders)))
+    B[:, 0] = 1.0
+    for i, k in enumerate(orders):
+        B[:, 1 + 2 * i] = np.cos(k * phi)
+        B[:, 2 + 2 * i] = np.sin(k * phi)
+    return B
 
 
 def order_components(x, phi, orders=(1, 2, 3)):
@@ -29,12 +52,7 @@ def order_components(x, phi, orders=(1, 2, 3)):
     phase : ndarray (len(orders),), rad, ``x ~ A cos(k phi + phase)``
     """
     x = np.asarray(x, dtype=float)
-    phi = np.asarray(phi, dtype=float)
-    cols = [np.ones_like(phi)]
-    for k in orders:
-        cols += [np.cos(k * phi), np.sin(k * phi)]
-    B = np.column_stack(cols)
-    coef, *_ = np.linalg.lstsq(B, x, rcond=None)
+    coef, *_ = np.linalg.lstsq(harmonic_basis(phi, orders), x, rcond=None)
     a, b = coef[1::2], coef[2::2]
     return np.hypot(a, b), np.arctan2(-b, a)
 

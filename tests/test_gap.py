@@ -143,15 +143,24 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
                           "--quiet"], capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
     doc = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
-    for key in ("verdict", "ranking", "where", "shrink"):
-        assert key in doc
+    # the keys docs/gap.md promises (an effect verdict: the conditional ones too)
+    for key in ("verdict", "ranking", "where", "shrink", "gap_before", "n_heldout_features",
+                "nuisance", "noise", "split", "sampling", "channels", "settings",
+                "sknarx_version", "command", "provenance", "shrink_band", "gap_after",
+                "regions_after"):
+        assert key in doc, key
+    assert doc["shrink_band"] is not None and len(doc["shrink_band"]) == 2
+    assert {"commit", "date_utc", "dependencies"} <= set(doc["provenance"])
     r0 = doc["ranking"][0]
     for key in ("effect", "params", "heldout_gap_before", "heldout_gap_after", "shrink",
                 "evidence"):
         assert key in r0
     assert {"speed_range", "order", "channel", "share"} <= set(doc["where"][0])
     assert "narx" in doc and doc["narx"]["terms_measured"]
-    assert (tmp_path / "out" / "report.html").exists()
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "noise level: about" not in html  # the floor comes from the settings
+    assert f"{doc['settings']['no_gap_per_feature']:.3g}" in html
+    assert "Regenerate with" in html and doc["provenance"]["date_utc"] in html
     assert (tmp_path / "out" / "gap_map.png").exists()
 
 

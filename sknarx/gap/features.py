@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..orders import harmonic_basis
+
 __all__ = ["ORDERS", "order_features", "ORDER_LABELS", "NONSYNC_BANDS", "is_nonsync"]
 
 ORDERS = (1 / 3, 1 / 2, 1.0, 2.0, 3.0)
@@ -66,12 +68,7 @@ def _window_features(w, t, Y, fs, orders):
     """Order vectors, standard errors and line energies of one window (all channels)."""
     n = t.size
     phi = w * t
-    all_orders = tuple(orders) + _EXTRA
-    B = np.empty((n, 1 + 2 * len(all_orders)))
-    B[:, 0] = 1.0
-    for i, k in enumerate(all_orders):
-        B[:, 1 + 2 * i] = np.cos(k * phi)
-        B[:, 2 + 2 * i] = np.sin(k * phi)
+    B = harmonic_basis(phi, tuple(orders) + _EXTRA)
     coef, *_ = np.linalg.lstsq(B, Y, rcond=None)
     R = Y - B @ coef
     dof = max(n - B.shape[1], 1)

@@ -21,7 +21,22 @@ import pandas as pd
 
 from .features import is_nonsync
 
-__all__ = ["compare", "regions", "gap_statistic"]
+__all__ = ["compare", "regions", "gap_statistic", "true_runs"]
+
+
+def true_runs(mask, max_hole: int = 0) -> list[tuple[int, int]]:
+    """Half-open index ranges of the runs of True in ``mask``.
+
+    Runs separated by at most ``max_hole`` False entries are joined; a run always
+    starts and ends on a True entry.
+    """
+    idx = np.flatnonzero(np.asarray(mask, dtype=bool))
+    if idx.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(idx) > max_hole + 1)
+    starts = np.r_[idx[0], idx[cut + 1]]
+    stops = np.r_[idx[cut], idx[-1]] + 1
+    return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 _ORDER_K = {"1/3x": 1 / 3, "1/2x": 1 / 2, "1x": 1.0, "2x": 2.0, "3x": 3.0}
 NONSYNC_SIGMAS = 3.0
@@ -100,21 +115,14 @@ def regions(cmp: pd.DataFrame, z_threshold: float = 9.0) -> list[dict]:
         return out
     for (window, channel, feature), g in cmp.groupby(["window", "channel", "feature"]):
         g = g.sort_values("speed")
-        sig = (g["z2"] > z_threshold).to_numpy()
         speeds = g["speed"].to_numpy()
         excess = g["excess"].to_numpy()
-        start = None
-        for i in range(len(g) + 1):
-            if i < len(g) and sig[i]:
-                start = i if start is None else start
-            elif start is not None:
-                sl = slice(start, i)
-                out.append({
-                    "speed_range": [float(speeds[start]), float(speeds[i - 1])],
-                    "order": feature, "channel": channel, "window": window,
-                    "share": float(excess[sl].sum() / total),
-                    "max_gap_m": float(g["gap"].to_numpy()[sl].max()),
-                })
-                start = None
+        for a, b in true_runs(g["z2"].to_numpy() > z_threshold):
+            out.append({
+                "speed_range": [float(speeds[a]), float(speeds[b - 1])],
+                "order": feature, "channel": channel, "window": window,
+                "share": float(excess[a:b].sum() / total),
+                "max_gap_m": float(g["gap"].to_numpy()[a:b].max()),
+            })
     out.sort(key=lambda r: -r["share"])
     return out

@@ -31,6 +31,7 @@ from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import runup_order_response, sweep_parameter
 from .bode import RPM, bin_bode, load_bode, runup_rate
 from .bode_report import figures, html_report
+from .gapmap import true_runs
 
 __all__ = ["load_bode", "bin_bode", "runup_rate", "diagnose_order_domain"]
 
@@ -210,19 +211,13 @@ def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0
         if s_without is None:
             continue
         gain = _z2(z, s_without, se) - _z2(z, s_full, se)
-        sig = np.flatnonzero(gain > thr)
-        if sig.size == 0:
+        runs = true_runs(gain > thr, max_hole=max_hole)
+        if not runs:
             out[name] = {"rpm_range": None, "share_of_gain": 0.0}
             continue
-        runs, start = [], sig[0]
-        for a, b in zip(sig[:-1], sig[1:], strict=True):
-            if b - a > max_hole + 1:
-                runs.append((start, a))
-                start = b
-        runs.append((start, sig[-1]))
         pos = np.clip(gain, 0, None)
-        found = sorted(({"rpm_range": [float(rpm[a]), float(rpm[b])],
-                         "share_of_gain": float(pos[a:b + 1].sum() / pos.sum()),
+        found = sorted(({"rpm_range": [float(rpm[a]), float(rpm[b - 1])],
+                         "share_of_gain": float(pos[a:b].sum() / pos.sum()),
                          "noisy_region": bool(rpm[a] > noisy_rpm)} for a, b in runs),
                        key=lambda x: -x["share_of_gain"])
         # the main location: the strongest run outside the noisy region, if any
@@ -260,23 +255,16 @@ def _blocks(n, size=3):
     return (np.arange(n) // size) % 2 == 0
 
 
-def _regions(bins, z2, noisy_rpm, thr=9.0):
+def _regions(bins, z2, noisy_rpm, probe, thr=9.0):
     excess = np.clip(z2 - 2.0, 0, None)
     total = excess.sum()
-    out, start = [], None
-    sig = z2 > thr
-    for i in range(len(bins) + 1):
-        if i < len(bins) and sig[i]:
-            start = i if start is None else start
-        elif start is not None:
-            sl = slice(start, i)
-            out.append({"speed_range": [float(bins.speed.iloc[start]),
-                                        float(bins.speed.iloc[i - 1])],
-                        "rpm_range": [float(bins.rpm.iloc[start]), float(bins.rpm.iloc[i - 1])],
-                        "order": "1x", "channel": "plane1_x", "window": "run-up",
-                        "share": float(excess[sl].sum() / total) if total else 0.0,
-                        "noisy_region": bool(bins.rpm.iloc[start] > noisy_rpm)})
-            start = None
+    out = []
+    for a, b in true_runs(z2 > thr):
+        out.append({"speed_range": [float(bins.speed.iloc[a]), float(bins.speed.iloc[b - 1])],
+                    "rpm_range": [float(bins.rpm.iloc[a]), float(bins.rpm.iloc[b - 1])],
+                    "order": "1x", "channel": probe, "window": "run-up",
+                    "share": float(excess[a:b].sum() / total) if total else 0.0,
+                    "noisy_region": bool(bins.rpm.iloc[a] > noisy_rpm)})
     out.sort(key=lambda r: -r["share"])
     return out
 
@@ -416,7 +404,7 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     for _ in range(300):
         pick = rng.choice(hidx, hidx.size, replace=True)
         boot.append(1 - ha[pick].sum() / max(hb[pick].sum(), 1e-300))
-    where = _regions(bins, z2_cal, noisy)
+    where = _regions(bins, z2_cal, noisy, probe.get("name", "probe"))
     z2_best = _z2(z, s_best, se)
     response = {"kind": "steady-state order response"}
     if sweep_note is not None:

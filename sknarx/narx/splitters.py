@@ -49,6 +49,7 @@ class LeaveOneSpeedOut(BaseCrossValidator):
             yield speeds == w
 
     def get_n_splits(self, X=None, y=None, groups=None):
+        """Number of folds: one per held-out speed (interior speeds only by default)."""
         speeds = self._speeds(X, groups)
         n = np.unique(speeds).size
         return max(n - 2, 0) if self.interior else n

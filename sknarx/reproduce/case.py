@@ -47,5 +47,6 @@ class PaperCase:
     notes: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """The settings as plain JSON types (tuples as lists), as in ``metrics.json``."""
         d = asdict(self)
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}

@@ -70,13 +70,40 @@ class Effect:
     signature = ""
 
     def modify_parameters(self, params):
+        """The rotor parameters with this effect's static change applied (a new object).
+
+        Parameters
+        ----------
+        params : RotorParameters
+
+        Returns
+        -------
+        RotorParameters
+        """
         return params
 
     def force_kernel(self, context: EffectContext):
-        """``(kernel, params_array)`` or ``None``."""
+        """The compiled extra force of this effect, or ``None``.
+
+        Returns ``(kernel, params_array)``: a numba function
+        ``kernel(t, phi, omega, alpha, q, v, p, out)`` that adds its generalised
+        forces (N, N m) to ``out`` from the state ``q`` (m, rad) and ``v``, and the
+        float array ``p`` it reads (DOF indices first).
+        """
         return None
 
     def modify_speed(self, t, omega, rng):
+        """The shaft speed (rad/s) the rotor actually turns at, given the nominal ``omega``.
+
+        Parameters
+        ----------
+        t : ndarray
+            Time, s.
+        omega : ndarray
+            Nominal speed, rad/s.
+        rng : numpy.random.Generator
+            Seeded per speed step.
+        """
         return omega
 
     def measure(self, table, rng):
@@ -92,16 +119,20 @@ class Effect:
     # -- calibration interface -------------------------------------------------
     @classmethod
     def param_names(cls) -> list[str]:
+        """Names of the searched parameters, in ``bounds`` order."""
         return list(cls.bounds)
 
     def vector(self) -> np.ndarray:
+        """The searched parameters in ``bounds`` order (the calibration's vector)."""
         return np.array([getattr(self, n) for n in self.param_names()], dtype=float)
 
     @classmethod
     def from_vector(cls, x):
+        """The effect with its searched parameters from a calibration vector."""
         return cls(**{n: float(v) for n, v in zip(cls.param_names(), x, strict=True)})
 
     def to_dict(self) -> dict:
+        """All fields of the effect (parameters, location) as a plain dict."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def __repr__(self):
@@ -387,6 +418,7 @@ class SpeedFluctuation(Effect):
 
     @classmethod
     def from_vector(cls, x):
+        """The effect with its searched parameters from a calibration vector."""
         return cls(amplitude=float(x[0]), frequency=float(x[1]))
 
     def modify_speed(self, t, omega, rng):
@@ -414,6 +446,7 @@ class ProbeRunout(Effect):
 
     @classmethod
     def from_vector(cls, x):
+        """The effect with its searched parameters from a calibration vector."""
         return cls(amplitude=float(x[0]), phase=float(x[1]))
 
     def measure(self, table, rng):

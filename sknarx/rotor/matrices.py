@@ -53,10 +53,6 @@ class RotorMatrices:
     K: np.ndarray
     gravity_force: np.ndarray  # N (or N m), constant
 
-    @property
-    def m_diag(self) -> np.ndarray:
-        return np.diag(self.M).copy()
-
 
 def _rank1(v, s):
     v = np.asarray(v, dtype=float)

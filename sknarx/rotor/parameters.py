@@ -168,6 +168,7 @@ class RotorParameters:
         return replace(self, **changes)
 
     def to_dict(self) -> dict:
+        """All parameters as a plain dict (SI units), the inverse of ``from_dict``."""
         return asdict(self)
 
     @classmethod

@@ -1,0 +1,93 @@
+"""The package's layout rules: imports flow one way, nobody inside imports the root,
+no module imports another that imports it back."""
+
+import ast
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[1] / "sknarx"
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PKG.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports(path: Path) -> set[str]:
+    """Absolute names of the sknarx modules a file imports (at any depth, lazily or not)."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if not target.startswith("sknarx"):
+                continue
+            if node.module is None:  # "from . import x": x is a submodule or a root name
+                for alias in node.names:
+                    sub = f"{target}.{alias.name}"
+                    found = (PKG.parent / sub.replace(".", "/")).with_suffix(".py").exists() \
+                        or (PKG.parent / sub.replace(".", "/")).is_dir()
+                    out.add(sub if found else target)
+            else:
+                out.add(target)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names if a.name.startswith("sknarx"))
+    out.discard(name)
+    return out
+
+
+MODULES = {module_name(p): imports(p) for p in PKG.rglob("*.py")}
+
+
+def test_nobody_inside_imports_the_package_root():
+    offenders = {m: sorted(i) for m, i in MODULES.items() if "sknarx" in i and m != "sknarx"}
+    assert not offenders, offenders
+
+
+def test_the_identification_core_depends_on_no_later_stage():
+    for m, deps in MODULES.items():
+        if m.startswith("sknarx.narx"):
+            bad = [d for d in deps if d.startswith(("sknarx.rotor", "sknarx.gap", "sknarx.io",
+                                                    "sknarx.reproduce", "sknarx.cli"))]
+            assert not bad, (m, bad)
+        if m.startswith("sknarx.rotor"):
+            bad = [d for d in deps if d.startswith(("sknarx.narx", "sknarx.gap",
+                                                    "sknarx.reproduce", "sknarx.cli"))]
+            assert not bad, (m, bad)
+
+
+def _owner(mod: str) -> str:
+    """The room a module belongs to: its subpackage, or itself at the top level."""
+    parts = mod.split(".")
+    return ".".join(parts[:2])
+
+
+def test_no_import_cycle_between_rooms():
+    graph: dict[str, set[str]] = {}
+    for m, deps in MODULES.items():
+        a = _owner(m)
+        if a == "sknarx":
+            continue
+        graph.setdefault(a, set()).update(
+            _owner(d) for d in deps if _owner(d) not in (a, "sknarx"))
+    seen, stack = set(), []
+
+    def visit(node):
+        if node in stack:
+            raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(node):]
+                                                                 + [node]))
+        if node in seen:
+            return
+        stack.append(node)
+        for nxt in graph.get(node, ()):
+            visit(nxt)
+        stack.pop()
+        seen.add(node)
+
+    for node in graph:
+        visit(node)
