@@ -41,6 +41,7 @@ def test_example_runs_in_a_clone_without_shared_data(path, clone, tmp_path):
     assert probe.stdout.startswith(str(clone)), "the example must import the clone's package"
 
 
+@pytest.mark.slow
 def test_paper_command_quick(tmp_path):
     out = tmp_path / "paper"
     res = subprocess.run([sys.executable, "-m", "sknarx", "paper", "--out", str(out), "--quick",

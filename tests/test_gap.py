@@ -134,6 +134,7 @@ def test_blind_subset_says_no_gap_on_effect_free_data():
     assert d["verdict"] == "no-gap"
 
 
+@pytest.mark.slow
 def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     measured, _ = runout_trial
     path = tmp_path / "measured.csv"
@@ -196,6 +197,7 @@ def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes
     assert decide(50.0, [small, pair], s, 100)["_names"] == ("runout",)
 
 
+@pytest.mark.slow
 def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
     # seed 5068 of the blind benchmark: the cheapest Sobol probe sits near angle pi
     # and converges there (cost ~6,200); the true basin is near 0 (cost ~290)
@@ -216,6 +218,7 @@ def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
     assert abs(cal.effect_params[0]["depth"] / true["depth"] - 1) < 0.2
 
 
+@pytest.mark.slow
 def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_absorbed():
     # crack seed 21: the nuisance-only fit pulls the stiffness scale to 0.86 (the crack's
     # loss of mean stiffness, the rig's is 1.01); a crack started there converged to a

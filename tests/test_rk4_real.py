@@ -11,7 +11,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rk4-runup" / "runup_bode.csv"
 
-pytestmark = pytest.mark.skipif(not DATA.exists(), reason="shared RK-4 data not present")
+pytestmark = [pytest.mark.skipif(not DATA.exists(), reason="shared RK-4 data not present"),
+              pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -124,8 +124,12 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                        channels=tuple(channels), transient_s=settings.transient_s)
     speeds = np.array(info["speeds"])
     train, held = speeds[0::2], speeds[1::2]
+    logger.info("%d speed steps x %d channel(s) at %.0f Hz: extracting order features",
+                speeds.size, len(channels), info["fs"])
     meas = order_features(measured, channels, settings.transient_s)
     tick("measured order features")
+    logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
+                train.size)
 
     # the nuisance-only model: start its unbalance phase from the 1x phase difference
     nominal = model.features(train, np.array([v[3] for v in NUISANCE.values()]))
@@ -181,6 +185,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                         max_nfev=settings.max_nfev)
         return _held(classes, names, cal)
 
+    logger.info("held-out gap %.3g per feature (no-gap floor %.3g): fitting %d effect "
+                "candidate(s)", e0, settings.no_gap_per_feature, len(candidates))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         singles = _parallel(settings, (delayed(run)((c,)) for c in candidates),
