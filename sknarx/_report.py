@@ -99,7 +99,8 @@ def figure(path, caption: str = "") -> str:
 
 
 def quantity(value, unit: str = "", digits: int = 3) -> str:
-    """``1.23e-05 m``, ``0.872 -``: significant digits and the unit, never 16 digits."""
+    """``1.23e-05 m``, ``1648 rpm``, ``0.872``: significant digits and the unit, never 16
+    digits; plain notation between 1e-3 and 1e5, scientific outside."""
     if value is None:
         return "-"
     if isinstance(value, str):
@@ -107,7 +108,11 @@ def quantity(value, unit: str = "", digits: int = 3) -> str:
     v = float(value)
     if not math.isfinite(v):
         return str(v)
-    text = f"{v:.{digits}g}"
+    if v == 0 or 1e-3 <= abs(v) < 1e5:  # plain notation: 1648 rpm, 0.0345 m
+        decimals = max(digits - 1 - math.floor(math.log10(abs(v))), 0) if v else 0
+        text = f"{v:.{decimals}f}"
+    else:
+        text = f"{v:.{digits}g}"
     unit = unit.strip()
     return f"{text} {unit}" if unit and unit != "-" else text
 

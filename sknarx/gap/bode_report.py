@@ -61,7 +61,8 @@ def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None):
 def html_report(doc, figs):
     v = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
     which = table(
-        ([str(r["effect"]), f"{100 * r['shrink']:.0f} %", _params(r["params"]),
+        ([r["effect"] if isinstance(r["effect"], str) else " + ".join(r["effect"]),
+          f"{100 * r['shrink']:.0f} %", _params(r["params"]),
           "; ".join(r["evidence"])] for r in doc["ranking"] if r.get("testable", True)),
         ["candidate", "held-out gap removed", "fitted parameters", "evidence"])
     untested = "".join(f"<li>{html.escape(r['effect'])}: {html.escape(r['reason'])}</li>"

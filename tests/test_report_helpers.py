@@ -1,0 +1,45 @@
+"""The shared report helpers: quantities with units, bound flags, provenance, empty tables."""
+
+import math
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sknarx._report import at_bound, page, provenance, quantity, table
+
+
+def test_quantities_carry_units_and_few_digits():
+    assert quantity(1648.2, "rpm") == "1648 rpm"
+    assert quantity(3.8e-6, "m") == "3.8e-06 m"
+    assert quantity(0.0345, "m") == "0.0345 m"
+    assert quantity(999999999.9995, "N/m") == "1e+09 N/m"
+    assert quantity(0.87, "-") == "0.870"
+    assert quantity(None) == "-" and quantity(float("inf"), "m") == "inf"
+
+
+@given(st.floats(-1e12, 1e12, allow_nan=False).filter(lambda v: v != 0))
+def test_a_quantity_reads_back_to_its_value_within_its_digits(v):
+    text = quantity(v, "m", digits=3)
+    assert text.endswith(" m") and len(text) < 16
+    back = float(text[:-2])
+    assert math.isclose(back, v, rel_tol=6e-3, abs_tol=1e-300)
+
+
+def test_values_on_their_search_bound_are_flagged():
+    assert at_bound(999999999.9995, 1e6, 1e9, "log") == "upper"
+    assert at_bound(1e6 * 1.0001, 1e6, 1e9, "log") == "lower"
+    assert at_bound(3e7, 1e6, 1e9, "log") is None
+    assert at_bound(0.0, 0.0, 0.6) == "lower" and at_bound(0.3, 0.0, 0.6) is None
+
+
+def test_provenance_and_page():
+    p = provenance("sknarx gap --measured m.csv --out o")
+    assert {"sknarx_version", "commit", "date_utc", "python", "dependencies", "command"} <= set(p)
+    assert p["dependencies"]["numpy"]
+    text = page("Title", "<p>body</p>", p)
+    assert "Regenerate with" in text and p["date_utc"] in text and "numpy" in text
+
+
+def test_an_empty_table_says_why():
+    assert "nothing significant" in table([], ["a"], empty="nothing significant")
+    assert "<table>" in table([[1, "x"]], ["a", "b"])
