@@ -1,4 +1,4 @@
-"""Command line: ``sknarx paper --out DIR``, ``sknarx gap --measured FILE --out DIR``.
+"""Command line: ``sknarx paper``, ``sknarx gap`` and ``sknarx unbalance``.
 
 Every mistake a user can make with their input (a missing or malformed file, wrong
 columns, an unknown option value) ends in one line that names the problem and the
@@ -124,6 +124,22 @@ def _gap(args) -> int:
     return 0
 
 
+def _unbalance(args) -> int:
+    from .gap.unbalance_run import run_unbalance
+    from .rotor.config import load_config
+
+    out = _check_out(args.out)
+    cfg = load_config(args.rotor)
+    doc = run_unbalance(args.features, cfg, out, _command_line())
+    cv = doc["cross_validation"]["methods"]["model-based (this package)"]
+    print(f"leave-one-condition-out on {doc['cross_validation']['n_conditions']} labelled "
+          f"conditions: MAE {cv['mae_gmm']:.2f} g mm, detection {100 * cv['detection']:.0f} %, "
+          f"localisation {100 * cv['localisation']:.0f} %")
+    print(f"wrote {out / 'predictions.csv'} ({len(doc['predictions'])} rows), "
+          f"{out / 'report.html'} and {out / 'unbalance.json'}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     from ._version import __version__
 
@@ -161,6 +177,16 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"effects to search (default: all): {', '.join(EFFECTS)}")
     g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
     g.set_defaults(func=_gap)
+    u = sub.add_parser("unbalance", parents=[common],
+                       help="identify unbalance per disk from 1x response vectors through a "
+                       "calibrated rotor model")
+    u.add_argument("--features", required=True,
+                   help="1x feature table (.csv or .parquet), one row per record, as "
+                   "sknarx.datasets.load_rk4_unbalance")
+    u.add_argument("--rotor", required=True,
+                   help="rotor file (.toml) with a [[probes]] entry per probe of the table")
+    u.add_argument("--out", required=True, help="output folder (created)")
+    u.set_defaults(func=_unbalance)
     return parser
 
 

@@ -500,9 +500,9 @@ def _limits(cfg, info, bins, noisy, runup, until) -> list:
                    "is used.")
     else:
         out.append("The record is treated as quasi-steady.")
-    if len(info["probes"]) == 1:
-        out.append("One probe: the support anisotropy's principal axes and the probe angle "
-                   "are confounded with the split; both bearings are assumed alike.")
+    # a Bode record carries one probe's 1x, whatever the rotor file describes
+    out.append("One probe: the support anisotropy's principal axes and the probe angle "
+               "are confounded with the split; both bearings are assumed alike.")
     return out
 
 
