@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,8 +32,28 @@ def test_keys_and_files(diagnosis):
     for key in ("verdict", "ranking", "where", "shrink", "nominal_calibration", "limits",
                 "located", "gap_by_band", "response_model"):
         assert key in doc
-    for name in ("report.html", "bode.png", "polar.png", "runup_zoom.png"):
+    for name in ("report.html", "bode.png", "polar.png", "runup_zoom.png", "bode_fit.csv"):
         assert (out / name).exists()
+
+
+def test_critical_speeds_modes_sweep_and_the_fitted_bode_table(diagnosis):
+    doc, out = diagnosis
+    crit = doc["critical_speeds_rpm"]
+    assert crit == sorted(crit) and len(crit) == 2
+    # the ~1770 rpm feature is the run-up's beat, not a critical speed
+    assert not any(1740 <= c <= 1790 for c in crit)
+    for mode in doc["modes"]:
+        assert 0 < mode["damping_ratio"] < 0.2 and 0 < mode["damping_ratio_std"]
+        assert 0 < mode["rpm_std"] < 0.05 * mode["rpm"]
+    sweep = doc["sweep"]
+    assert 220 < sweep["rate_rpm_s"] < 240 and sweep["quasi_steady_valid"] is False
+    assert sweep["sweep_parameter"] > sweep["limit"]
+    table = pd.read_csv(out / "bode_fit.csv")
+    assert list(table.columns) == ["rpm", "measured_amp", "measured_phase_deg", "nominal_amp",
+                                   "nominal_phase_deg", "corrected_amp", "corrected_phase_deg"]
+    raw = pd.read_csv(DATA)
+    assert len(table) == len(raw)  # every measured revolution, in the input's units
+    np.testing.assert_allclose(np.sort(table.measured_amp), np.sort(raw.amp_1x), rtol=1e-9)
 
 
 def test_runout_found_where_it_acts_and_gap_halved_on_held_out_segments(diagnosis):

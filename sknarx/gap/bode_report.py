@@ -100,6 +100,12 @@ calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N
 {quantity(c['calibrated'], 'N s/m')} +- {quantity(c['std'], 'N s/m', 2)} (first critical now
 {quantity(fc['calibrated'], 'rpm')}).</p>
 {imgs}
+<h2>Modes of the corrected rotor</h2>
+{table(([f"mode {i + 1}", f"{quantity(m['rpm'], 'rpm', 4)} +- {quantity(m['rpm_std'], 'rpm', 2)}",
+         f"{m['damping_ratio']:.4f} +- {m['damping_ratio_std']:.4f}"]
+        for i, m in enumerate(doc.get('modes', []))),
+       ["mode", "natural frequency at rest", "damping ratio"])}
+<p class="note">{_sweep_text(doc.get('sweep', {}))}</p>
 <h2>Response model</h2><p>{html.escape(rm.get('kind', ''))}: {html.escape(rm.get('why', ''))}.
 {html.escape(verdict_models)}</p>
 <h2>Where each effect acts</h2><ul>{located}</ul>
@@ -109,6 +115,16 @@ calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N
 <h2>What these data cannot tell</h2>
 <ul>{''.join(f'<li>{html.escape(x)}</li>' for x in doc['limits'])}</ul>"""
     return page("Sim-to-real gap: order-domain diagnosis", body, doc["provenance"])
+
+
+def _sweep_text(sweep) -> str:
+    if not sweep or sweep.get("rate_rpm_s") is None:
+        return "The record is not a run-up: steady-state responses apply."
+    valid = "valid" if sweep["quasi_steady_valid"] else "NOT valid"
+    return html.escape(
+        f"Run-up rate {quantity(sweep['rate_rpm_s'], 'rpm/s')}; sweep parameter "
+        f"{sweep['sweep_parameter']:.2f} ({sweep['measure']}), against a limit of "
+        f"{sweep['limit']:g}: a quasi-steady (steady-state Bode) model is {valid} here.")
 
 
 _UNITS = {"bearing_damping": "N s/m", "bearing_stiffness": "N/m", "kx": "N/m", "ky": "N/m",

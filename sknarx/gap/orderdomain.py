@@ -23,12 +23,13 @@ import logging
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from scipy.optimize import least_squares
 
 from .._progress import progress_bar
 from .._report import provenance
 from ..rotor.beam import beam_rotor_from_config
-from ..rotor.runup import runup_order_response, sweep_parameter
+from ..rotor.runup import damped_modes, runup_order_response, sweep_parameter
 from .bode import RPM, bin_bode, load_bode, runup_rate
 from .bode_report import figures, html_report
 from .gapmap import true_runs
@@ -473,12 +474,74 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
         "sknarx_version": __version__, "command": command,
         "provenance": provenance(command),
     }
+    modes = _verdict_modes(rotor, best)
+    doc["critical_speeds_rpm"] = sorted(m["rpm"] for m in modes)
+    doc["modes"] = modes
+    sweep_info = (runup or sweep_note or {})
+    doc["sweep"] = {
+        "rate_rpm_s": sweep_info.get("rate_rpm_s"),
+        "sweep_parameter": sweep_info.get("sweep", {}).get("sweep_parameter"),
+        "limit": SWEEP_LIMIT,
+        "quasi_steady_valid": (None if not sweep_info else
+                               bool(sweep_info["sweep"]["sweep_parameter"] < SWEEP_LIMIT)),
+        "measure": "alpha / (zeta^2 w_n^2) at the first mode of the calibrated rotor",
+    }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    _bode_fit_table(rows, bins, s_nom, s_cal, s_best, meas_cfg).to_csv(
+        out / "bode_fit.csv", index=False)
     figs = figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi)
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1, default=float))
     (out / "report.html").write_text(html_report(doc, figs))
     return doc
+
+
+def _verdict_modes(rotor, best, n_draws=200):
+    """Damped modes of the verdict's calibrated rotor, at rest, with standard errors from
+    the fit's parameter errors (Monte Carlo on log-normal stiffness and damping)."""
+    p, sd = best["params"], best.get("params_std", {})
+    if "kx" in p:
+        k = np.array([p["kx"], p["ky"]])
+        k_sd = np.array([sd.get("kx", 0.0), sd.get("ky", 0.0)])
+    else:
+        k = np.array([p["bearing_stiffness"]] * 2)
+        k_sd = np.array([sd.get("k", 0.0)] * 2)
+    c, c_sd = p["bearing_damping"], sd.get("c", 0.0)
+
+    def modes(kx, ky, cc):
+        r = rotor.with_bearings(kxx=kx, kyy=ky, cxx=cc, cyy=cc)
+        return damped_modes(r, 2)
+
+    w0, z0 = modes(k[0], k[1], c)
+    rng = np.random.default_rng(0)
+    draws = []
+    for _ in range(n_draws):
+        kk = k * np.exp(rng.standard_normal(2) * k_sd / k)
+        cc = c * np.exp(rng.standard_normal() * c_sd / c)
+        draws.append(np.concatenate(modes(kk[0], kk[1], cc)))
+    draws = np.array(draws)
+    out = []
+    for i in range(len(w0)):
+        out.append({"rpm": float(w0[i] / RPM), "rpm_std": float(np.std(draws[:, i]) / RPM),
+                    "damping_ratio": float(z0[i]),
+                    "damping_ratio_std": float(np.std(draws[:, len(w0) + i]))})
+    return sorted(out, key=lambda m: m["rpm"])
+
+
+def _bode_fit_table(rows, bins, s_nom, s_cal, s_best, meas_cfg):
+    """Measured and modelled 1x per revolution, in the input's units and phase convention
+    (the models, computed per speed bin, are interpolated to each revolution's speed)."""
+    scale = float(meas_cfg.get("amplitude_scale", 1.0))
+    rpm = rows.rpm.to_numpy()
+    b = bins.rpm.to_numpy()  # beyond the end bins' centres the end values hold
+    out = {"rpm": rpm, "measured_amp": np.abs(rows.z.to_numpy()) / scale,
+           "measured_phase_deg": np.degrees(np.angle(rows.z.to_numpy()))}
+    for name, s in (("nominal", s_nom), ("corrected", s_best)):
+        zi = np.interp(rpm, b, s.real) + 1j * np.interp(rpm, b, s.imag)
+        out[f"{name}_amp"] = np.abs(zi) / scale
+        out[f"{name}_phase_deg"] = np.degrees(np.angle(zi))
+    return pd.DataFrame(out)[["rpm", "measured_amp", "measured_phase_deg", "nominal_amp",
+                              "nominal_phase_deg", "corrected_amp", "corrected_phase_deg"]]
 
 
 def _limits(cfg, info, bins, noisy, runup, until) -> list:

@@ -154,6 +154,24 @@ def runup_order_response(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: fl
     return rpm, Z
 
 
+def damped_modes(rotor, n: int = 2, n_modes: int = 8, gyro_speed: float = 0.0):
+    """The ``n`` lowest damped modes: natural frequencies (rad/s) and damping ratios.
+
+    Parameters
+    ----------
+    rotor : BeamRotor
+    n : int
+        How many modes (a split pair of an anisotropic support is two).
+    gyro_speed : float
+        Spin speed (rad/s) of the gyroscopic term; 0: at rest.
+    """
+    _, _, A = _modal_state(rotor, n_modes, gyro_speed)
+    lam = np.linalg.eigvals(A)
+    lam = lam[lam.imag > 0]
+    lam = lam[np.argsort(np.abs(lam))][:n]
+    return np.abs(lam), -lam.real / np.abs(lam)
+
+
 def sweep_parameter(rotor, rate_rpm_s: float, n_modes: int = 8) -> dict:
     """How far a run-up at ``rate_rpm_s`` is from quasi-steady at the first mode.
 
@@ -163,12 +181,8 @@ def sweep_parameter(rotor, rate_rpm_s: float, n_modes: int = 8) -> dict:
     the tracked peak and leave a beat behind it (the steady-state response is a
     fair model only well below that).
     """
-    _, _, A = _modal_state(rotor, n_modes, 0.0)  # at rest: no gyroscopic split
-    lam = np.linalg.eigvals(A)
-    lam = lam[lam.imag > 0]
-    first = lam[np.argmin(np.abs(lam))]
-    wn = abs(first)
-    zeta = -first.real / wn
+    wn, zeta = damped_modes(rotor, 1, n_modes)  # at rest: no gyroscopic split
+    wn, zeta = float(wn[0]), float(zeta[0])
     alpha = rate_rpm_s * RPM
     return {"first_mode_rpm": float(wn / RPM), "damping_ratio": float(zeta),
             "sweep_parameter": float(alpha / (zeta**2 * wn**2))}
