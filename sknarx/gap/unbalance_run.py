@@ -173,7 +173,7 @@ def _figures(out, model, blind, U):
     fig.legend(handles=handles, loc="lower center", ncol=len(chans), fontsize=7)
     fig.suptitle("Unlabelled conditions: measured response change (lines, mils) and the "
                  "identified unbalance's prediction (x)", fontsize=9)
-    fig.subplots_adjust(bottom=0.12)
+    fig.subplots_adjust(bottom=0.18, hspace=0.35)
     return {"polar": save(fig, out / "polar_unlabelled.png")}
 
 
