@@ -7,8 +7,9 @@ import csv
 import logging
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
+
+from ._json import json_safe
 
 __all__ = ["read_table", "model_to_json", "model_from_json", "json_safe"]
 
@@ -72,22 +73,6 @@ def read_table(path, what="table", nrows=None) -> pd.DataFrame:
                          "data rows.")
     return df
 
-
-def json_safe(x):
-    """Plain JSON types; inf/NaN become strings a reader can see; private keys (``_``) go."""
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items() if not str(k).startswith("_")}
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return json_safe(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else str(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 def model_to_json(model, path=None) -> str:
     """JSON text of a fitted :class:`~sknarx.SpeedScheduledNarx`; also written to ``path``.

@@ -16,6 +16,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from .._json import json_safe
 from ._design import check_nan_rows, read_term_matrix
 from ._els import extended_least_squares
 from ._orthogonal import coef_covariance, compress, termset_blocks
@@ -57,17 +58,6 @@ def _sqrt_psd(C):
     """A factor ``F`` with ``F F^T = C`` for a covariance that may be singular."""
     lam, V = np.linalg.eigh(0.5 * (C + C.T))
     return V * np.sqrt(np.clip(lam, 0.0, None))
-
-
-def _json_ready(x):
-    """inf/NaN as strings a reader can see (JSON has no such numbers)."""
-    if isinstance(x, dict):
-        return {k: _json_ready(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_json_ready(v) for v in x]
-    if isinstance(x, float) and not np.isfinite(x):
-        return str(x)
-    return x
 
 
 class SpeedExtrapolationWarning(UserWarning):
@@ -888,7 +878,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         with their covariances, and the speed functions; floats round-trip exactly.
         """
         check_is_fitted(self, "coef_poly_")
-        text = json.dumps(_json_ready(model_state(self)), indent=1)
+        text = json.dumps(json_safe(model_state(self)), indent=1)
         if path is not None:
             Path(path).write_text(text)
         return text
