@@ -122,14 +122,14 @@ def _record_sums(u, e, max_lag):
     energy = np.einsum("ij,ij->i", A, A)
     lags_all = np.arange(-max_lag, max_lag + 2)
     num = _xcorr(A, ec, lags_all)  # one pass for the four tests against e(t)
-    at = {int(t): j for j, t in enumerate(lags_all)}
+    at = max_lag  # column of lag 0 in num
     ee2 = float(ec @ ec)
     return {
-        "phi_ee": (pos[1:], num[3, [at[int(t)] for t in pos[1:]]], energy[3], ee2),
-        "phi_ue": (sym, num[0, [at[int(t)] for t in sym]], energy[0], ee2),
+        "phi_ee": (pos[1:], num[3, at + pos[1:]], energy[3], ee2),
+        "phi_ue": (sym, num[0, at + sym], energy[0], ee2),
         # e(t-1-tau) u(t-1-tau) with e(t): the eu series at lag tau + 1
-        "phi_e_eu": (pos, num[2, [at[int(t) + 1] for t in pos]], energy[2], ee2),
-        "phi_u2_e": (sym, num[1, [at[int(t)] for t in sym]], energy[1], ee2),
+        "phi_e_eu": (pos, num[2, at + pos + 1], energy[2], ee2),
+        "phi_u2_e": (sym, num[1, at + sym], energy[1], ee2),
         "phi_u2_e2": (sym, _xcorr(u2[None, :], e2, sym)[0], energy[1], float(e2 @ e2)),
     }
 
@@ -174,8 +174,19 @@ def correlation_tests(model, X, speeds=None, max_lag=20) -> pd.DataFrame:
     if not (isinstance(max_lag, (int, np.integer)) and max_lag >= 1):
         raise ValueError(f"max_lag must be a positive integer, got {max_lag!r}.")
     lag = max(fitted.ny_, fitted.nu_)
-    rows = []
+    cols = {k: [] for k in ("scope", "speed", "test", "lag", "value", "band", "n_samples")}
     pooled: dict = {}
+
+    def block(scope, speed, test, taus, value, band, n):
+        k = len(taus)
+        cols["scope"].append(np.full(k, scope, dtype=object))
+        cols["speed"].append(np.full(k, speed))
+        cols["test"].append(np.full(k, test, dtype=object))
+        cols["lag"].append(np.asarray(taus, dtype=int))
+        cols["value"].append(np.asarray(value, dtype=float))
+        cols["band"].append(np.full(k, band))
+        cols["n_samples"].append(np.full(k, n))
+
     for d in _records(X, speeds):
         e = one_step_residuals(fitted, d.u, d.y, d.speed)
         u = np.asarray(d.u, dtype=float)[lag:]
@@ -194,19 +205,14 @@ def correlation_tests(model, X, speeds=None, max_lag=20) -> pd.DataFrame:
             acc[2] += aa
             acc[3] += bb
             acc[4] += n
-            rows.extend({"scope": "per_speed", "speed": float(d.speed), "test": test,
-                         "lag": int(t), "value": float(v), "band": band,
-                         "outside": bool(abs(v) > band), "n_samples": n}
-                        for t, v in zip(taus, value, strict=True))
+            block("per_speed", float(d.speed), test, taus, value, band, n)
     for test, (taus, num, aa, bb, n) in pooled.items():
         den = np.sqrt(aa * bb)
         value = num / den if den > 0 else np.full(len(taus), np.nan)
-        band = 1.96 / np.sqrt(n)
-        rows.extend({"scope": "pooled", "speed": np.nan, "test": test, "lag": int(t),
-                     "value": float(v), "band": band, "outside": bool(abs(v) > band),
-                     "n_samples": n}
-                    for t, v in zip(taus, value, strict=True))
-    return pd.DataFrame(rows)
+        block("pooled", np.nan, test, taus, value, 1.96 / np.sqrt(n), n)
+    table = pd.DataFrame({k: np.concatenate(v) for k, v in cols.items()})
+    table.insert(6, "outside", np.abs(table["value"].to_numpy()) > table["band"].to_numpy())
+    return table
 
 
 def validity_summary(table: pd.DataFrame) -> pd.DataFrame:
