@@ -48,6 +48,14 @@ def test_critical_speeds_modes_sweep_and_the_fitted_bode_table(diagnosis):
     sweep = doc["sweep"]
     assert 220 < sweep["rate_rpm_s"] < 240 and sweep["quasi_steady_valid"] is False
     assert sweep["sweep_parameter"] > sweep["limit"]
+    beat = doc["response_model"]["beat"]
+    assert beat["measured_minima_rpm"] and beat["swept_model_minima_rpm"]
+    lo, hi = beat["above_peak_rpm"]
+    assert 1550 < lo < hi
+    rms = beat["complex_residual_rms_m"]
+    assert set(rms) == {"run-up model", "quasi-steady model"} and all(v > 0 for v in rms.values())
+    assert beat["quasi_over_swept"] == pytest.approx(rms["quasi-steady model"]
+                                                     / rms["run-up model"])
     table = pd.read_csv(out / "bode_fit.csv")
     assert list(table.columns) == ["rpm", "measured_amp", "measured_phase_deg", "nominal_amp",
                                    "nominal_phase_deg", "corrected_amp", "corrected_phase_deg"]

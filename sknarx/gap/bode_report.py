@@ -105,7 +105,7 @@ calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N
          f"{m['damping_ratio']:.4f} +- {m['damping_ratio_std']:.4f}"]
         for i, m in enumerate(doc.get('modes', []))),
        ["mode", "natural frequency at rest", "damping ratio"])}
-<p class="note">{_sweep_text(doc.get('sweep', {}))}</p>
+<p class="note">{_sweep_text(doc.get('sweep', {}))} {_beat_text(rm.get('beat'))}</p>
 <h2>Response model</h2><p>{html.escape(rm.get('kind', ''))}: {html.escape(rm.get('why', ''))}.
 {html.escape(verdict_models)}</p>
 <h2>Where each effect acts</h2><ul>{located}</ul>
@@ -115,6 +115,23 @@ calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N
 <h2>What these data cannot tell</h2>
 <ul>{''.join(f'<li>{html.escape(x)}</li>' for x in doc['limits'])}</ul>"""
     return page("Sim-to-real gap: order-domain diagnosis", body, doc["provenance"])
+
+
+def _beat_text(beat) -> str:
+    if not beat:
+        return ""
+    rms = beat["complex_residual_rms_m"]
+    parts = [f"Beat behind the peak: amplitude minima measured at "
+             f"{', '.join(f'{x:.0f}' for x in beat['measured_minima_rpm'])} rpm, in the swept "
+             f"model at {', '.join(f'{x:.0f}' for x in beat['swept_model_minima_rpm'])} rpm "
+             f"(the linear-sweep beat law: "
+             f"{', '.join(f'{x:.0f}' for x in beat['expected_minima_rpm'])} rpm). Complex "
+             f"residual from {beat['above_peak_rpm'][0]:.0f} to {beat['above_peak_rpm'][1]:.0f} "
+             "rpm: " + ", ".join(f"{k} {quantity(v, 'm')}" for k, v in rms.items()) + "."]
+    if "quasi_over_swept" in beat:
+        parts.append(f"The quasi-steady model's residual is {beat['quasi_over_swept']:.2f} "
+                     "times the swept model's there.")
+    return html.escape(" ".join(parts))
 
 
 def _sweep_text(sweep) -> str:

@@ -228,13 +228,39 @@ def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0
     return out
 
 
-def _local_minima(bins, lo_rpm, hi_rpm):
-    """Speeds of local minima of the binned 1x amplitude between two speeds."""
+def _local_minima(bins, lo_rpm, hi_rpm, curve=None):
+    """Speeds of local minima of the binned 1x amplitude (or of a model ``curve`` at the
+    bins) between two speeds."""
     rpm = bins.rpm.to_numpy()
-    a = np.abs(bins.z.to_numpy())
+    a = np.abs(bins.z.to_numpy() if curve is None else curve)
     i = np.flatnonzero((rpm > lo_rpm) & (rpm < hi_rpm))
     i = i[(i > 0) & (i < len(a) - 1)]
     return [float(rpm[k]) for k in i if a[k] < a[k - 1] and a[k] < a[k + 1]]
+
+
+def _beat_comparison(bins, s_swept, s_quasi, f_n, expected, top_rpm):
+    """How well a model reproduces the beat behind the peak: the amplitude minima of the
+    measurement and of the swept model, and the complex residual above the peak (m, RMS
+    over the bins between the measured peak and ``top_rpm``) of both models."""
+    rpm = bins.rpm.to_numpy()
+    z = bins.z.to_numpy()
+    below = rpm < top_rpm
+    peak = float(rpm[below][int(np.argmax(np.abs(z[below])))])
+    above = (rpm > peak) & below
+    hi = expected[-1] + 40
+
+    def rms(s):
+        return float(np.sqrt(np.mean(np.abs(z[above] - s[above]) ** 2)))
+
+    out = {"measured_minima_rpm": _local_minima(bins, f_n, hi),
+           "swept_model_minima_rpm": _local_minima(bins, f_n, hi, curve=s_swept),
+           "expected_minima_rpm": list(expected),
+           "above_peak_rpm": [peak, float(rpm[above].max()) if above.any() else peak],
+           "complex_residual_rms_m": {"run-up model": rms(s_swept)}}
+    if s_quasi is not None:
+        out["complex_residual_rms_m"]["quasi-steady model"] = rms(s_quasi)
+        out["quasi_over_swept"] = rms(s_quasi) / max(rms(s_swept), 1e-300)
+    return out
 
 
 def _gap_by_band(bins, z2_before, z2_after, held, noisy_rpm):
@@ -442,6 +468,7 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
                                        "quasi-steady model": E_q},
             "beat_minima_expected_rpm": beat,
             "measured_minima_rpm": _local_minima(bins, f_n, beat[-1] + 40),
+            "beat": _beat_comparison(bins, s_best, s_quasi, f_n, beat, min(noisy, until)),
         }
     if base_choice is not None:
         response["base_model_choice"] = base_choice
