@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ._version import __version__
 
-__all__ = ["provenance", "page", "table", "figure", "quantity", "at_bound"]
+__all__ = ["provenance", "page", "table", "figure", "quantity", "at_bound", "value_range"]
 
 DEPENDENCIES = ("numpy", "scipy", "scikit-learn", "pandas", "numba", "matplotlib", "joblib")
 
@@ -133,3 +133,9 @@ def at_bound(value, lo, hi, scale="lin", tol=1e-3) -> str | None:
     if hi - v <= tol * span:
         return "upper"
     return None
+
+
+def value_range(lo, hi, unit: str, decimals: int = 1) -> str:
+    """``90.0 rad/s`` for a single value, ``90.0-110.0 rad/s`` for a range."""
+    a, b = f"{float(lo):.{decimals}f}", f"{float(hi):.{decimals}f}"
+    return f"{a} {unit}" if a == b else f"{a}-{b} {unit}"

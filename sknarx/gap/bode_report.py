@@ -6,7 +6,7 @@ import html
 
 import numpy as np
 
-from .._report import figure, page, quantity, table
+from .._report import figure, page, quantity, table, value_range
 from ..plotting import plt, save
 
 __all__ = ["figures", "html_report"]
@@ -68,7 +68,7 @@ def html_report(doc, figs):
     untested = "".join(f"<li>{html.escape(r['effect'])}: {html.escape(r['reason'])}</li>"
                        for r in doc["ranking"] if not r.get("testable", True))
     where = table(
-        ([_rpm_range(r["rpm_range"]), r["order"], f"{100 * r['share']:.1f} %",
+        ([value_range(*r["rpm_range"], "rpm", 0), r["order"], f"{100 * r['share']:.1f} %",
           "yes" if r["noisy_region"] else ""] for r in doc["where"][:12]),
         ["speeds", "order", "share of the gap", "noisy region"],
         empty="No bin differs significantly from the calibrated nominal model.")
@@ -83,7 +83,7 @@ def html_report(doc, figs):
     verdict_models = ("" if not vm else "Held-out excess of the verdict: " + ", ".join(
         f"{name} {val:.0f}" for name, val in vm.items()) + " (dimensionless).")
     located = "".join(
-        f"<li>{html.escape(name)}: {_rpm_range(loc['rpm_range'])} "
+        f"<li>{html.escape(name)}: {value_range(*loc['rpm_range'], 'rpm', 0)} "
         f"({100 * loc['share_of_gain']:.0f} % of its gain)</li>"
         for name, loc in doc.get("located", {}).items() if loc.get("rpm_range"))
     bands = table(
@@ -159,7 +159,3 @@ def _params(params) -> str:
             parts.append(f"{key} {quantity(value, unit, 4)}")
     return "; ".join(parts)
 
-
-def _rpm_range(r):
-    lo, hi = r
-    return f"{lo:.0f} rpm" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} rpm"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._report import at_bound, figure, page, provenance, quantity, table
+from .._report import at_bound, figure, page, provenance, quantity, table, value_range
 from ..io import json_safe
 from ..plotting import plt, save
 from ..rotor import EFFECTS
@@ -82,10 +82,6 @@ def _label(effect):
     return effect if isinstance(effect, str) else " + ".join(effect)
 
 
-def _speed_range(r):
-    lo, hi = r
-    return f"{lo:.1f} rad/s" if lo == hi else f"{lo:.1f}-{hi:.1f} rad/s"
-
 
 def effect_parameters(effect, params) -> str:
     """Fitted parameters with units; a value on its search bound is flagged."""
@@ -138,7 +134,7 @@ def _html(doc, figs, prov):
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
                  "dimensionless.")
     where = table(
-        ([_speed_range(r["speed_range"]), r["order"], r["channel"], r["window"],
+        ([value_range(*r["speed_range"], "rad/s"), r["order"], r["channel"], r["window"],
           f"{100 * r['share']:.1f} %", quantity(r.get("max_gap_m"), "m")]
          for r in doc["where"][:15]),
         ["speeds", "order", "channel", "window", "share of the gap", "largest gap"],

@@ -117,9 +117,11 @@ class EforResult:
     esr: float  # percent
     degenerate: np.ndarray  # (K, M) bool: candidates linearly dependent at the end
     stop_reason: str
-    # (K, s, s): inverse Gram matrix of the normalised selected terms, taken along the
-    # inverse Gram-Schmidt path (A^-1 diag(1/|w|^2) A^-T), selection order
-    gram_inv: np.ndarray = None
+    # (K, s, s) unit upper-triangular Gram-Schmidt factors and (K, s) squared norms of
+    # the orthogonalised selected terms: what the coefficient covariance needs (it is
+    # only formed for the final fit, not in every pruning trial)
+    gs_factor: np.ndarray = None
+    gs_norms: np.ndarray = None
     # (K,): squared residual norm of the normalised output after the selected terms
     rss: np.ndarray = None
 
@@ -193,7 +195,7 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
     s = len(selected)
     proj = np.stack(proj, axis=1) if s else np.zeros((K, 0, width))
     coef = np.zeros((K, s))
-    gram_inv = np.zeros((K, s, s))
+    factors = np.zeros((K, s, s))
     ww_sel = np.stack(ww_steps, axis=1) if s else np.zeros((K, 0))
     for k in range(K):
         A = np.eye(s)
@@ -201,7 +203,7 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
             A[i, i + 1 :] = proj[k, i, selected[i + 1 :]]
         g = proj[k, :, M]
         coef[k] = inverse_gram_schmidt(A, g)
-        gram_inv[k] = _inverse_gram(A, ww_sel[k])
+        factors[k] = A
     W = Z[:, :, :M]
     final_degenerate = (np.einsum("krm,krm->km", W, W) < tol) | dead_col
     return EforResult(
@@ -212,7 +214,8 @@ def efor(Z, norms, esr=None, max_terms=None, order=None, tol=1e-12) -> EforResul
         esr=100.0 - cum,
         degenerate=final_degenerate,
         stop_reason=stop_reason,
-        gram_inv=gram_inv,
+        gs_factor=factors,
+        gs_norms=ww_sel,
         rss=np.einsum("kr,kr->k", Z[:, :, M], Z[:, :, M]),
     )
 
@@ -280,7 +283,9 @@ def coef_covariance(res: EforResult, norms: np.ndarray, n_rows) -> tuple[np.ndar
     with np.errstate(divide="ignore", invalid="ignore"):
         sigma2_n = np.where(dof > 0, res.rss / np.where(dof > 0, dof, 1.0), np.nan)
     scale = norms[:, -1][:, None] / np.where(norms[:, sel] > 0, norms[:, sel], 1.0)
-    cov = sigma2_n[:, None, None] * res.gram_inv * scale[:, :, None] * scale[:, None, :]
+    gram_inv = np.stack([_inverse_gram(A, ww) for A, ww in zip(res.gs_factor, res.gs_norms,
+                                                                strict=True)])
+    cov = sigma2_n[:, None, None] * gram_inv * scale[:, :, None] * scale[:, None, :]
     return cov, sigma2_n * norms[:, -1] ** 2, dof
 
 

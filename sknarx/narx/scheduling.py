@@ -353,7 +353,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.dof_per_speed_ = fitted.dof
         self.err_ = pd.DataFrame(fitted.err, columns=names, index=index)
         self.speeds_ = speeds
-        self.coef_degree_ = self._degree(1 if speeds is None else np.unique(speeds).size)
+        self.coef_degree_ = self._resolve_degree(1 if speeds is None else np.unique(speeds).size)
         self.exponents_, self.ny_, self.nu_ = _process_structure(names)
         self._fit_speed_polynomials(fitted.coef, speeds)
         return self
@@ -435,11 +435,9 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                                        [noise[i] for i in order])
         return fitted
 
-    def _degree(self, n_speeds=None):
-        """The speed-polynomial degree in force: ``coef_degree_`` once fitted; before,
-        ``coef_degree``, or when None 3 (the paper's) capped by the number of speeds."""
-        if n_speeds is None:
-            return self.coef_degree_
+    def _resolve_degree(self, n_speeds):
+        """The speed-polynomial degree for ``n_speeds`` speeds: ``coef_degree``, or when
+        None 3 (the paper's) capped by the number of speeds."""
         if self.coef_degree is None:
             return int(max(min(3, n_speeds - 1), 0))
         return int(self.coef_degree)
@@ -458,7 +456,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 f"{speeds.size} speed(s) are too few for speed_basis='spline': at least 3 are "
                 "needed."
             )
-        degree = self._degree(speeds.size)
+        degree = self._resolve_degree(speeds.size)
         if self.speed_basis == "polynomial" and speeds.size < degree + 1:
             raise ValueError(
                 f"{speeds.size} speed(s) cannot determine coefficient polynomials of degree "
@@ -481,7 +479,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.coef_spline_ = None
         if self.speed_basis == "spline":
             self.coef_spline_ = _spline(speeds, coef)
-        J = self._degree()
+        J = self.coef_degree_
         if a == b:  # a single speed (then coef_degree is 0): constant coefficients
             self.coef_poly_ = coef[:1].T.copy()
             self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names,
@@ -537,7 +535,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         var = self.coef_std_err_per_speed_.to_numpy() ** 2
         if self.speed_range_ is None:
             return np.array(np.broadcast_to(np.sqrt(var[0]), w.shape + (var.shape[1],)))
-        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self._degree())
+        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self.coef_degree_)
         return np.sqrt(L**2 @ var).reshape(w.shape + (var.shape[1],))
 
     def _coefficients_at(self, omega):
@@ -670,7 +668,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         if self.speed_range_ is None:
             L = np.ones((uniq.size, 1))
         else:
-            L = speed_weights(self.speeds_, uniq, self.speed_basis, self._degree())
+            L = speed_weights(self.speeds_, uniq, self.speed_basis, self.coef_degree_)
         Theta = self.coef_per_speed_.to_numpy()
         chol = [_sqrt_psd(C) for C in self.coef_cov_per_speed_]
         runs = np.full((n_draws, u.size), np.nan)
@@ -853,7 +851,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         speeds = np.asarray(self.speeds_, dtype=float)
         Theta = self.coef_per_speed_.to_numpy()
         K = speeds.size
-        need = 3 if self.speed_basis == "spline" else self._degree() + 1
+        need = 3 if self.speed_basis == "spline" else self.coef_degree_ + 1
         if np.unique(speeds).size < need:
             raise ValueError(f"{K} speeds are too few for a bootstrap of this speed basis.")
         draws = []
@@ -866,7 +864,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 L = speed_weights(speeds[uniq], speeds, "spline", 0)
                 draws.append((L @ Theta[uniq]).T)
             else:
-                draws.append(raw_power_map(speeds[idx], self._degree()) @ Theta[idx])
+                draws.append(raw_power_map(speeds[idx], self.coef_degree_) @ Theta[idx])
                 draws[-1] = draws[-1].T
         table["std_err"] = np.std(np.stack(draws), axis=0, ddof=1).reshape(-1)
         return table

@@ -117,18 +117,13 @@ def _fmt(x, pct=False, digits=3):
 
 
 def _df_html(df, pct_cols=(), digits=3):
-    cols = list(df.columns)
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in cols)
-    rows = []
-    for _, r in df.iterrows():
-        cells = []
-        for col in cols:
-            v = r[col]
-            if isinstance(v, (float, np.floating)):
-                v = _fmt(float(v), col in pct_cols, digits)
-            cells.append(f"<td>{html.escape(str(v))}</td>")
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
+    """A DataFrame as the shared report table, floats formatted (percent where asked)."""
+    def cell(col, v):
+        return _fmt(float(v), col in pct_cols, digits) if isinstance(v, (float, np.floating)) \
+            else v
+
+    return table(([cell(c, r[c]) for c in df.columns] for _, r in df.iterrows()),
+                 list(df.columns))
 
 
 def _img(figs, key, caption):
