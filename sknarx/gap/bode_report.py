@@ -145,6 +145,7 @@ def _sweep_text(sweep) -> str:
 
 
 _UNITS = {"bearing_damping": "N s/m", "bearing_stiffness": "N/m", "kx": "N/m", "ky": "N/m",
+          "cx": "N s/m", "cy": "N s/m",
           "probe_angle_deg": "deg", "runout_amplitude_m": "m", "runout_phase_deg": "deg",
           "critical_speed_rpm": "rpm", "critical_speeds_rpm": "rpm"}
 

@@ -69,10 +69,10 @@ class _Model:
         self.until = runup_until_rpm
         self.gyro_speed = gyro_speed
 
-    def basis(self, speeds, kx, ky, c, angle=0.0):
+    def basis(self, speeds, kx, ky, cx, cy, angle=0.0):
         """Probe response to unit unbalances; the probe reads the displacement along
         ``angle`` (rad) from the support's x principal axis."""
-        r = self.rotor.with_bearings(kxx=kx, kyy=ky, cxx=c, cyy=c)
+        r = self.rotor.with_bearings(kxx=kx, kyy=ky, cxx=cx, cyy=cy)
         speeds = np.asarray(speeds, dtype=float)
         XY = r.probe_responses(speeds, self.probe["position"])
         H = np.cos(angle) * XY[:, :, 0] + np.sin(angle) * XY[:, :, 1]
@@ -119,12 +119,15 @@ class _Candidate:
 
 def _predict(model, cand, p, speeds_fit, z_fit, se_fit, speeds_eval):
     if cand.anisotropic:
-        kx, ky, angle, c = 10 ** p[0], 10 ** p[1], p[2], 10 ** p[3]
+        # stiffness and damping each along the support's principal axes: a single
+        # damping would tie the two modes of the split pair to one decay rate
+        kx, ky, angle, cx, cy = 10 ** p[0], 10 ** p[1], p[2], 10 ** p[3], 10 ** p[4]
     else:
         kx = ky = 10 ** p[0]
-        angle, c = 0.0, 10 ** p[1]
+        angle, cx = 0.0, 10 ** p[1]
+        cy = cx
     allsp = np.unique(np.r_[speeds_fit, speeds_eval])
-    B = model.basis(allsp, kx, ky, c, angle)
+    B = model.basis(allsp, kx, ky, cx, cy, angle)
     Bf = B[np.searchsorted(allsp, speeds_fit)]
     Be = B[np.searchsorted(allsp, speeds_eval)]
     if cand.runout:
@@ -132,7 +135,7 @@ def _predict(model, cand, p, speeds_fit, z_fit, se_fit, speeds_eval):
         Be = np.column_stack([Be, np.ones(len(speeds_eval)), 1j * np.ones(len(speeds_eval))])
     w = 1.0 / np.sqrt(se_fit**2 + (RTOL * np.abs(z_fit)) ** 2)
     coef, _ = _solve_linear(Bf, z_fit, w)
-    return coef, Be @ coef, (kx, ky, c, angle)
+    return coef, Be @ coef, (kx, ky, cx, cy, angle)
 
 
 def _z2(z, s, se):
@@ -149,8 +152,8 @@ def _fit(model, cand, bins, train, bounds, start=None):
 
     (klo, khi), (clo, chi) = bounds
     if cand.anisotropic:
-        lo = [np.log10(klo), np.log10(klo), 0.0, np.log10(clo)]
-        hi = [np.log10(khi), np.log10(khi), np.pi / 2, np.log10(chi)]
+        lo = [np.log10(klo), np.log10(klo), 0.0, np.log10(clo), np.log10(clo)]
+        hi = [np.log10(khi), np.log10(khi), np.pi / 2, np.log10(chi), np.log10(chi)]
     else:
         lo, hi = [np.log10(klo), np.log10(clo)], [np.log10(khi), np.log10(chi)]
     starts = []
@@ -163,7 +166,7 @@ def _fit(model, cand, bins, train, bounds, start=None):
             for d in (0.05, 0.1, 0.15, 0.25):
                 for sh in (-d, 0.0, d):
                     for ang in np.radians([15, 30, 45, 60, 75]):
-                        x = np.clip([k0 + sh - d, k0 + sh + d, ang, c0], lo, hi)
+                        x = np.clip([k0 + sh - d, k0 + sh + d, ang, c0, c0], lo, hi)
                         grid.append((float(np.sum(resid(x) ** 2)), x))
             grid.sort(key=lambda g: g[0])
             starts = [g[1] for g in grid[:2]]
@@ -212,7 +215,9 @@ def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0
         if s_without is None:
             continue
         gain = _z2(z, s_without, se) - _z2(z, s_full, se)
-        runs = true_runs(gain > thr, max_hole=max_hole)
+        # a run does not straddle the noisy speed: its two sides are weighed apart
+        runs = [piece for a, b in true_runs(gain > thr, max_hole=max_hole)
+                for piece in _split_at(rpm, a, b, noisy_rpm)]
         if not runs:
             out[name] = {"rpm_range": None, "share_of_gain": 0.0}
             continue
@@ -226,6 +231,12 @@ def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0
         out[name] = {**clean[0], "runs": found[:4],
                      "heldout_gain": float(np.clip(gain[held], 0, None).sum())}
     return out
+
+
+def _split_at(rpm, a, b, at):
+    """The run of bins ``a:b`` cut where the speed first exceeds ``at``."""
+    k = a + int(np.searchsorted(rpm[a:b], at, side="right"))
+    return [(a, b)] if k in (a, b) else [(a, k), (k, b)]
 
 
 def _local_minima(bins, lo_rpm, hi_rpm, curve=None):
@@ -377,17 +388,17 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
         p, sd = _fit(model, cand, bins, train, bounds, start=start)
         coef, s_all, kcs, z2 = evaluate(cand, p)
         E = float(np.clip(z2[held] - 2, 0, None).sum())
-        params = {"bearing_damping": kcs[2]}
         if cand.anisotropic:
-            params.update(kx=kcs[0], ky=kcs[1], probe_angle_deg=float(np.degrees(kcs[3])))
+            params = {"kx": kcs[0], "ky": kcs[1], "cx": kcs[2], "cy": kcs[3],
+                      "probe_angle_deg": float(np.degrees(kcs[4]))}
             freqs = rotor.with_bearings(kxx=kcs[0], kyy=kcs[1], cxx=kcs[2],
-                                        cyy=kcs[2]).natural_frequencies(2)
+                                        cyy=kcs[3]).natural_frequencies(2)
             params["critical_speeds_rpm"] = sorted((freqs / RPM).tolist())
         else:
-            params["bearing_stiffness"] = kcs[0]
+            params = {"bearing_stiffness": kcs[0], "bearing_damping": kcs[2]}
             params["critical_speed_rpm"] = float(
                 rotor.with_bearings(kxx=kcs[0], kyy=kcs[0]).natural_frequencies(1)[0] / RPM)
-        names = ["kx", "ky", "probe_angle", "c"] if cand.anisotropic else ["k", "c"]
+        names = ["kx", "ky", "probe_angle", "cx", "cy"] if cand.anisotropic else ["k", "c"]
         std = {k: float(v if k == "probe_angle" else v * np.log(10) * 10 ** p[i])
                for i, (k, v) in enumerate(zip(names, sd, strict=True))}
         if cand.runout:
@@ -528,24 +539,21 @@ def _verdict_modes(rotor, best, n_draws=200):
     the fit's parameter errors (Monte Carlo on log-normal stiffness and damping)."""
     p, sd = best["params"], best.get("params_std", {})
     if "kx" in p:
-        k = np.array([p["kx"], p["ky"]])
-        k_sd = np.array([sd.get("kx", 0.0), sd.get("ky", 0.0)])
-    else:
-        k = np.array([p["bearing_stiffness"]] * 2)
-        k_sd = np.array([sd.get("k", 0.0)] * 2)
-    c, c_sd = p["bearing_damping"], sd.get("c", 0.0)
+        names = ("kx", "ky", "cx", "cy")
+        v = np.array([p[k] for k in names])
+        v_sd = np.array([sd.get(k, 0.0) for k in names])
+    else:  # isotropic: one stiffness and one damping, drawn once for both axes
+        v = np.array([p["bearing_stiffness"], p["bearing_damping"]])
+        v_sd = np.array([sd.get("k", 0.0), sd.get("c", 0.0)])
 
-    def modes(kx, ky, cc):
-        r = rotor.with_bearings(kxx=kx, kyy=ky, cxx=cc, cyy=cc)
-        return damped_modes(r, 2)
+    def modes(q):
+        kx, ky, cx, cy = q if q.size == 4 else (q[0], q[0], q[1], q[1])
+        return damped_modes(rotor.with_bearings(kxx=kx, kyy=ky, cxx=cx, cyy=cy), 2)
 
-    w0, z0 = modes(k[0], k[1], c)
+    w0, z0 = modes(v)
     rng = np.random.default_rng(0)
-    draws = []
-    for _ in range(n_draws):
-        kk = k * np.exp(rng.standard_normal(2) * k_sd / k)
-        cc = c * np.exp(rng.standard_normal() * c_sd / c)
-        draws.append(np.concatenate(modes(kk[0], kk[1], cc)))
+    draws = [np.concatenate(modes(v * np.exp(rng.standard_normal(v.size) * v_sd / v)))
+             for _ in range(n_draws)]
     draws = np.array(draws)
     out = []
     for i in range(len(w0)):
