@@ -10,7 +10,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = sorted(p.relative_to(ROOT) for p in (ROOT / "examples").rglob("*.py"))
+# run where their outputs are pinned, so that a two-minute example does not run twice
+RUN_ELSEWHERE = {Path("examples/rk4/identify_unbalance.py"): "tests/test_unbalance.py",
+                 Path("examples/rk4/diagnose_rk4.py"): "tests/test_rk4_real.py"}
+EXAMPLES = sorted(p.relative_to(ROOT) for p in (ROOT / "examples").rglob("*.py")
+                  if p.relative_to(ROOT) not in RUN_ELSEWHERE)
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +43,11 @@ def test_example_runs_in_a_clone_without_shared_data(path, clone, tmp_path):
     probe = subprocess.run([sys.executable, "-c", "import sknarx; print(sknarx.__file__)"],
                            cwd=tmp_path, env=env, capture_output=True, text=True)
     assert probe.stdout.startswith(str(clone)), "the example must import the clone's package"
+
+
+def test_examples_run_elsewhere_exist_and_are_run_there():
+    for path, test in RUN_ELSEWHERE.items():
+        assert (ROOT / path).exists() and path.name in (ROOT / test).read_text()
 
 
 @pytest.mark.slow

@@ -12,7 +12,7 @@ from ..plotting import plt, save
 __all__ = ["figures", "html_report"]
 
 
-def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None):
+def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None, z2=None):
     rpm = bins.rpm.to_numpy()
     z = bins.z.to_numpy()
     lab = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
@@ -55,7 +55,26 @@ def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None):
         a1.legend(fontsize=7)
         a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
         figs["runup"] = save(fig, out / "runup_zoom.png")
+    if z2:
+        figs["residual"] = _residual_figure(out, rpm, z2, doc)
     return figs
+
+
+def _residual_figure(out, rpm, z2, doc):
+    """Normalised squared residual per bin (chi-square with 2 degrees of freedom when
+    the model is right): where the corrected model still disagrees."""
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for (name, v), style in zip(z2.items(), ("b.", "r."), strict=False):
+        ax.semilogy(rpm, np.clip(v, 1e-2, None), style, ms=3, label=name)
+    thr = doc["significant_z2"]
+    ax.axhline(thr, color="0.4", lw=0.8, ls="--",
+               label=f"{thr:g}: significant (p = {np.exp(-thr / 2):.3f} if the model is right)")
+    for r in doc.get("remaining", [])[:4]:
+        ax.axvspan(*r["rpm_range"], color="orange", alpha=0.15, lw=0)
+    ax.set(xlabel="speed (rpm)", ylabel="|z - model|^2 / variance",
+           title="What remains after the diagnosis (shaded: remaining regions)")
+    ax.legend(fontsize=7)
+    return save(fig, out / "residual.png")
 
 
 def html_report(doc, figs):
@@ -73,10 +92,16 @@ def html_report(doc, figs):
         ["speeds", "order", "share of the gap", "noisy region"],
         empty="No bin differs significantly from the calibrated nominal model.")
     imgs = "".join(figure(p) for p in figs.values())
+    remaining = table(
+        ([value_range(*r["rpm_range"], "rpm", 0), r["order"], f"{100 * r['share']:.1f} %",
+          "yes" if r["noisy_region"] else ""] for r in doc.get("remaining", [])[:12]),
+        ["speeds", "order", "share of what remains", "noisy region"],
+        empty="No bin differs significantly from the corrected model.")
     nc = doc["nominal_calibration"]
     k, c, fc = (nc["bearing_stiffness_N_per_m"], nc["bearing_damping_N_s_per_m"],
                 nc["first_critical_rpm"])
-    measured_fc = (f"against the measured {quantity(fc['measured'], 'rpm')}"
+    measured_fc = (f"against the rotor file's first_critical_rpm "
+                   f"{quantity(fc['measured'], 'rpm')}"
                    if fc.get("measured") else "(no measured value in the rotor file)")
     rm = doc.get("response_model", {})
     vm = rm.get("verdict_heldout_excess")
@@ -102,15 +127,18 @@ calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N
 {imgs}
 <h2>Modes of the corrected rotor</h2>
 {table(([f"mode {i + 1}", f"{quantity(m['rpm'], 'rpm', 4)} +- {quantity(m['rpm_std'], 'rpm', 2)}",
-         f"{m['damping_ratio']:.4f} +- {m['damping_ratio_std']:.4f}"]
+         f"{m['damping_ratio']:.4f} +- {m['damping_ratio_std']:.4f}",
+         f"{m['sweep_parameter']:.2f}" if "sweep_parameter" in m else "-"]
         for i, m in enumerate(doc.get('modes', []))),
-       ["mode", "natural frequency at rest", "damping ratio"])}
+       ["mode", "natural frequency at rest", "damping ratio",
+        "sweep parameter alpha/(zeta w_n)^2"])}
 <p class="note">{_sweep_text(doc.get('sweep', {}))} {_beat_text(rm.get('beat'))}</p>
 <h2>Response model</h2><p>{html.escape(rm.get('kind', ''))}: {html.escape(rm.get('why', ''))}.
 {html.escape(verdict_models)}</p>
 <h2>Where each effect acts</h2><ul>{located}</ul>
 <h2>Gap by band (held-out)</h2>{bands}
 <h2>Where</h2>{where}
+<h2>What remains after the diagnosis</h2>{remaining}
 <h2>Which</h2>{which}<p>Not testable with these data:</p><ul>{untested}</ul>
 <h2>What these data cannot tell</h2>
 <ul>{''.join(f'<li>{html.escape(x)}</li>' for x in doc['limits'])}</ul>"""

@@ -41,6 +41,9 @@ logger = logging.getLogger(__name__)
 RTOL = 0.02  # model-form tolerance of a lumped linear rotor
 PAIR_MARGIN = 10.0  # held-out score (AIC) a pair must gain over its best member
 SWEEP_LIMIT = 0.1  # sweep parameter above which a run-up is simulated, not taken as steady
+# a bin's squared residual over its variance is chi-square with 2 degrees of freedom when
+# the model is right; above 9 (p = exp(-9/2) ~ 0.011) the bin counts as disagreeing
+SIGNIFICANT_Z2 = 9.0
 NOT_TESTABLE = {
     "misalignment": "AC-coupled probes give no shaft centreline, and a 1x-only record has no 2x",
     "crack": "needs 2x/3x orders, not in a 1x Bode record",
@@ -187,7 +190,7 @@ def _fit(model, cand, bins, train, bounds, start=None):
     return best.x, sd_log
 
 
-def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=9.0,
+def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=SIGNIFICANT_Z2,
             max_hole=2):
     """Where each effect of a candidate acts: the speed range holding most of its gain.
 
@@ -293,7 +296,7 @@ def _blocks(n, size=3):
     return (np.arange(n) // size) % 2 == 0
 
 
-def _regions(bins, z2, noisy_rpm, probe, thr=9.0):
+def _regions(bins, z2, noisy_rpm, probe, thr=SIGNIFICANT_Z2):
     excess = np.clip(z2 - 2.0, 0, None)
     total = excess.sum()
     out = []
@@ -444,6 +447,7 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
         boot.append(1 - ha[pick].sum() / max(hb[pick].sum(), 1e-300))
     where = _regions(bins, z2_cal, noisy, probe.get("name", "probe"))
     z2_best = _z2(z, s_best, se)
+    lab = best["effect"] if isinstance(best["effect"], str) else " + ".join(best["effect"])
     response = {"kind": "steady-state order response"}
     if sweep_note is not None:
         response.update(sweep=sweep_note["sweep"], rate_rpm_s=sweep_note["rate_rpm_s"],
@@ -487,6 +491,9 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
         "verdict": verdict,
         "ranking": tested + untested,
         "where": where,
+        # where the corrected model still disagrees with the measurement, the same way
+        "remaining": _regions(bins, z2_best, noisy, probe.get("name", "probe")),
+        "significant_z2": SIGNIFICANT_Z2,
         "shrink": float(best["shrink"]) if verdict != "unexplained" else 0.0,
         "shrink_band": [float(np.percentile(boot, 5)), float(np.percentile(boot, 95))],
         "nominal_calibration": {
@@ -516,6 +523,10 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     doc["critical_speeds_rpm"] = sorted(m["rpm"] for m in modes)
     doc["modes"] = modes
     sweep_info = (runup or sweep_note or {})
+    if sweep_info:  # each mode of the verdict's rotor has its own decay time to compare
+        alpha = sweep_info["rate_rpm_s"] * RPM
+        for m in modes:
+            m["sweep_parameter"] = float(alpha / (m["damping_ratio"] * m["rpm"] * RPM) ** 2)
     doc["sweep"] = {
         "rate_rpm_s": sweep_info.get("rate_rpm_s"),
         "sweep_parameter": sweep_info.get("sweep", {}).get("sweep_parameter"),
@@ -528,7 +539,8 @@ def diagnose_order_domain(measured_path, cfg, out, command) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     _bode_fit_table(rows, bins, s_nom, s_cal, s_best, meas_cfg).to_csv(
         out / "bode_fit.csv", index=False)
-    figs = figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi)
+    figs = figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi,
+                   z2={"calibrated nominal": z2_cal, f"corrected ({lab})": z2_best})
     (out / "diagnosis.json").write_text(json.dumps(doc, indent=1, default=float))
     (out / "report.html").write_text(html_report(doc, figs))
     return doc
