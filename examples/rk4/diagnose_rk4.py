@@ -6,7 +6,7 @@ clone, from any folder:
 It is the same as, from the repository root of a checkout with ``../shared`` beside it,
     sknarx gap --measured ../shared/data/rk4-runup/runup_bode.csv \\
                --rotor examples/rk4/rotor.toml --out rk4-out
-(the shipped file is byte-identical). About a minute on two cores.
+(the shipped file is byte-identical). About a minute and a half on two cores.
 """
 
 import sys

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.signal import lfilter, lfiltic
 
-__all__ = ["RPM", "runup_order_response", "sweep_parameter"]
+__all__ = ["RPM", "runup_order_response", "sweep_parameter", "transient_end_rpm"]
 
 RPM = 2 * np.pi / 60.0  # rad/s per rev/min
 
@@ -186,3 +186,40 @@ def sweep_parameter(rotor, rate_rpm_s: float, n_modes: int = 8) -> dict:
     alpha = rate_rpm_s * RPM
     return {"first_mode_rpm": float(wn / RPM), "damping_ratio": float(zeta),
             "sweep_parameter": float(alpha / (zeta**2 * wn**2))}
+
+
+def transient_end_rpm(rotor, rpm_start: float, rpm_end: float, rate_rpm_s: float,
+                      tol: float = 0.01, n_modes: int = 8) -> tuple[float, float | None]:
+    """Speed above which a run-up's free vibration has decayed below ``tol``.
+
+    Each damped mode crossed between ``rpm_start`` and ``rpm_end`` rings on after the
+    crossing and decays as ``exp(-zeta w_n t)``; at a constant rate ``alpha`` it has
+    fallen to ``tol`` of its size ``ln(1/tol) / (zeta w_n)`` seconds later, i.e.
+    ``alpha ln(1/tol) / (zeta w_n)`` rad/s above the mode. Above the largest such speed
+    the steady response is the tracked response to within ``tol``.
+
+    Returns
+    -------
+    until_rpm : float
+        That speed, capped at ``rpm_end``; ``rpm_start`` when no mode is crossed.
+    first_mode_rad_s : float or None
+        The lowest crossed mode's natural frequency (rad/s), or None.
+
+    Examples
+    --------
+    >>> from sknarx.rotor.beam import BeamRotor, Disk, Bearing
+    >>> rotor = BeamRotor(0.5, 0.01, disks=(Disk(0.25, 0.8, 0.076, 0.025),),
+    ...                   bearings=(Bearing(0.0, 1e5, 1e5, 60.0, 60.0),
+    ...                             Bearing(0.5, 1e5, 1e5, 60.0, 60.0)))
+    >>> until, w1 = transient_end_rpm(rotor, 500.0, 6000.0, 300.0)
+    >>> bool(w1 / RPM < until < 6000.0)
+    True
+    """
+    wn, zeta = damped_modes(rotor, n_modes // 2, n_modes)
+    crossed = (wn >= rpm_start * RPM) & (wn <= rpm_end * RPM)
+    if not crossed.any():
+        return float(rpm_start), None
+    alpha = rate_rpm_s * RPM
+    ends = wn[crossed] + alpha * np.log(1.0 / tol) / np.maximum(zeta[crossed] * wn[crossed],
+                                                                1e-12)
+    return float(min(ends.max() / RPM, rpm_end)), float(wn[crossed].min())
