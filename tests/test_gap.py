@@ -234,3 +234,37 @@ def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_
     assert d["shrink"] >= 0.95 * oracle
     fitted = d["ranking"][0]["nuisance"]["stiffness_scale"]
     assert abs(fitted / truth["nuisance"]["stiffness_scale"] - 1) < 0.03
+
+
+def _settled_sweep(seed=3, n_speeds=8):
+    """A mismatched rotor measured after settling at each speed (no transient)."""
+    from sknarx.rotor import MeasurementNoise, RotorBearingSimulator, RotorParameters
+
+    b = RotorParameters()
+    p = b.replace(k1=b.k1 * 1.02, c_a=b.c_a * 0.97, unbalance_phase=0.7)
+    sim = RotorBearingSimulator(p, effects=[MeasurementNoise(snr_db=30)], seed=seed)
+    speeds = list(np.linspace(81.7, 276.5, n_speeds).round(3))
+    tab = sim.sweep(speeds, fs=1000.0, n_samples=600, settle=2.0, progress=False)
+    return tab[["speed", "t", "xO1", "yO1", "xA", "yA"]]
+
+
+def test_transient_or_settled_is_read_from_the_records(runout_trial):
+    from sknarx.gap.features import TRANSIENT_RATIO, free_response_decay
+
+    channels = ["xO1", "yO1", "xA", "yA"]
+    from_rest = free_response_decay(runout_trial[0], channels)
+    settled = free_response_decay(_settled_sweep(), channels)
+    assert from_rest.transient.all() and (from_rest.ratio > 1.5 * TRANSIENT_RATIO).all()
+    assert (from_rest.decayed_s > 0).all() and (from_rest.decayed_s < 1.0).all()
+    assert (settled.ratio < TRANSIENT_RATIO).mean() > 0.8
+    assert (settled.decayed_s[~settled.transient] == 0).all()
+
+
+def test_a_settled_sweep_is_compared_with_settled_simulations_and_is_no_gap():
+    """Records taken after settling have no transient window: treating their first
+    0.5 s as a transient against a simulation started from rest made a gap of nothing."""
+    res = diagnose(_settled_sweep())
+    rec = res["records"]
+    assert rec["starts_with_transient"] is False and rec["transient_window_s"] == 0.0
+    assert rec["simulation_settle_s"] > 0
+    assert res["verdict"] == "no-gap"

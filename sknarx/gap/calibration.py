@@ -57,6 +57,7 @@ class SweepModel:
     channels: tuple
     transient_s: float = 0.5
     seed: int = 0
+    settle_s: float = 0.0  # simulated and discarded before each record (0: from rest)
 
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis
@@ -83,7 +84,7 @@ class SweepModel:
         def one(w):
             # automatic step: halved if an effect's stiff contact makes it unstable
             run = sim.simulate_columns(float(w), fs=self.fs, n_samples=self.n_samples,
-                                       settle=0.0)
+                                       settle=self.settle_s)
             Y = np.column_stack([run[c] for c in self.channels])
             return then((float(w), run["t"], Y))
 

@@ -35,7 +35,7 @@ from joblib import Parallel, delayed
 from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
-from .features import is_nonsync, order_features
+from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import regions
 from .settings import DiagnosisSettings
 
@@ -120,13 +120,21 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     measured, info = check_measured(measured, channels)
     channels = info["channels"]
     base = base or RotorParameters()
+    # transient or settled is read from the records, not assumed from their time axis:
+    # settled records are compared with settled simulations and have no transient window
+    decay = free_response_decay(measured, channels)
+    starts_transient = bool(decay["transient"].median() >= 0.5)
+    transient_s = settings.transient_s if starts_transient else 0.0
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(channels), transient_s=settings.transient_s)
+                       channels=tuple(channels), transient_s=transient_s,
+                       settle_s=0.0 if starts_transient else settings.settle_s)
     speeds = np.array(info["speeds"])
     train, held = speeds[0::2], speeds[1::2]
-    logger.info("%d speed steps x %d channel(s) at %.0f Hz: extracting order features",
-                speeds.size, len(channels), info["fs"])
-    meas = order_features(measured, channels, settings.transient_s)
+    logger.info("%d speed steps x %d channel(s) at %.0f Hz (%s): extracting order features",
+                speeds.size, len(channels), info["fs"],
+                f"records start with a transient, first {transient_s:g} s kept apart"
+                if starts_transient else "records are settled steady states")
+    meas = order_features(measured, channels, transient_s)
     tick("measured order features")
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
@@ -154,6 +162,12 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         "noise": _noise_summary(meas),
         "split": {"train_speeds": train.tolist(), "heldout_speeds": held.tolist()},
         "sampling": {"fs_hz": info["fs"], "samples_per_step": info["n_samples"]},
+        "records": {
+            "starts_with_transient": starts_transient, "transient_window_s": transient_s,
+            "simulation_settle_s": model.settle_s,
+            "decay_ratio": decay["ratio"].tolist(), "decayed_s": decay["decayed_s"].tolist(),
+            "rule": f"first-eighth residual RMS over the second half's > {TRANSIENT_RATIO:g} "
+                    "on most steps: the records start with a transient"},
         "channels": list(channels),
         "settings": asdict(settings),
     }

@@ -21,7 +21,8 @@ FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", *NONSYNC_LABELS]
 def heatmap(cmp, path, title):
     """log10(1 + z2) over speed x feature, one panel per channel and window."""
     chans = sorted(cmp.channel.unique())
-    wins = ["transient", "steady"]
+    # settled records have no transient window: one row of panels, not an empty one
+    wins = [w for w in ("transient", "steady") if (cmp.window == w).any()]
     fig, axes = plt.subplots(len(wins), len(chans), figsize=(3.2 * len(chans), 5.2),
                              squeeze=False, sharex=True, sharey=True)
     vmax = np.log10(1 + cmp.z2.max())

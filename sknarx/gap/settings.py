@@ -13,7 +13,7 @@ from dataclasses import dataclass
 __all__ = ["DiagnosisSettings", "SEARCH_FIELDS"]
 
 #: the fields that change what a diagnosis computes (the others only read its results)
-SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "seed")
+SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s", "seed")
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,11 @@ class DiagnosisSettings:
     pair_gain: float = 0.3  # a pair must remove this share of what the best single leaves
     n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
-    transient_s: float = 0.5
+    transient_s: float = 0.5  # transient window of records that start with a transient
+    # records found settled (see features.free_response_decay) are compared with
+    # simulations settled this long first: five time constants of the paper rotor's
+    # slowest lightly damped mode (see RotorBearingSimulator.simulate)
+    settle_s: float = 2.0
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
