@@ -98,9 +98,10 @@ def _gap(args) -> int:
     if model != "paper" or order_domain:
         from .gap.orderdomain import diagnose_order_domain
 
-        if args.candidates or args.channels:
-            logger.warning("--candidates and --channels apply to time-series sweeps; an "
-                           "order-domain (Bode) record is diagnosed against its own library")
+        if args.candidates or args.channels or args.no_update:
+            logger.warning("--candidates, --channels and --no-update apply to time-series "
+                           "sweeps; an order-domain (Bode) record is diagnosed against its "
+                           "own library")
         doc = diagnose_order_domain(args.measured, cfg, out, _command_line())
     else:
         from .gap.narx_view import narx_view_of
@@ -113,6 +114,12 @@ def _gap(args) -> int:
             logger.info("[%6.1f s] %s", time.perf_counter() - start, msg)
 
         kw = {"candidates": tuple(args.candidates)} if args.candidates else {}
+        if args.no_update:
+            from dataclasses import replace
+
+            from .gap import DiagnosisSettings
+
+            kw["settings"] = replace(DiagnosisSettings(), update_nominal=False)
         result = diagnose(measured, base=base, channels=args.channels, progress=progress, **kw)
         narx = None
         if not args.no_narx and result["verdict"] != "no-gap":
@@ -176,6 +183,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--candidates", nargs="+", choices=EFFECTS, metavar="EFFECT",
                    help=f"effects to search (default: all): {', '.join(EFFECTS)}")
     g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
+    g.add_argument("--no-update", action="store_true",
+                   help="do not update the nominal rotor's parameters before blaming an "
+                   "effect (only the four global nuisance scalars are fitted)")
     g.set_defaults(func=_gap)
     u = sub.add_parser("unbalance", parents=[common],
                        help="identify unbalance per disk from 1x response vectors through a "

@@ -38,6 +38,7 @@ from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import regions
 from .settings import DiagnosisSettings
+from .updating import update_nominal_model
 
 __all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
 
@@ -88,6 +89,47 @@ def _evidence(cmp_before, cmp_after, k=3):
     return out
 
 
+def _steady_1x(meas, speeds, channels):
+    """Measured steady-window 1x vectors (m) and standard errors, (speeds, channels)."""
+    m = meas[(meas.feature == "1x") & (meas.window == "steady")].set_index(
+        ["speed", "channel"])
+    idx = pd.MultiIndex.from_product([list(speeds), list(channels)])
+    m = m.reindex(idx)
+    shape = (len(speeds), len(channels))
+    z = (m["re"].to_numpy() + 1j * m["im"].to_numpy()).reshape(shape)
+    return z, m["se"].to_numpy().reshape(shape)
+
+
+def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, settings):
+    """Nominal model updating on the training speeds' steady 1x, simulated over exactly
+    the steady window the features were taken from."""
+    z, se = _steady_1x(meas, train, channels)
+    skip = int(round(transient_s * info["fs"]))
+    logger.info("updating the nominal rotor's parameters on the steady 1x of %d training "
+                "speeds", len(train))
+    return update_nominal_model(
+        z, np.maximum(se, 1e-12), train, channels, base=base,
+        max_nfev=settings.update_max_nfev,
+        nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
+                          "settle": settle_s + transient_s})
+
+
+def _update_summary(update) -> dict | None:
+    """The nominal update as plain JSON: what changed, how sure, what is inseparable."""
+    if update is None:
+        return None
+    return {
+        "updates": update.describe(),
+        "parameters": update.table.to_dict(orient="records"),
+        "inseparable_pairs": [{"a": a, "b": b, "correlation": c}
+                              for a, b, c in update.correlated_pairs],
+        "mismatch_1x": update.mismatch,
+        "chi2": update.cost,
+        "method": "regularised toward nominal (log-scale priors), nonlinear steady 1x at "
+                  "the training speeds, sensitivities from the linearised rotor",
+    }
+
+
 def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
              candidates=LIBRARY, settings: DiagnosisSettings | None = None,
              progress=None, exhaustive: bool = False) -> dict:
@@ -125,9 +167,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     decay = free_response_decay(measured, channels)
     starts_transient = bool(decay["transient"].median() >= 0.5)
     transient_s = settings.transient_s if starts_transient else 0.0
-    model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(channels), transient_s=transient_s,
-                       settle_s=0.0 if starts_transient else settings.settle_s)
+    settle_s = 0.0 if starts_transient else settings.settle_s
     speeds = np.array(info["speeds"])
     train, held = speeds[0::2], speeds[1::2]
     logger.info("%d speed steps x %d channel(s) at %.0f Hz (%s): extracting order features",
@@ -136,6 +176,14 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                 if starts_transient else "records are settled steady states")
     meas = order_features(measured, channels, transient_s)
     tick("measured order features")
+    update = None
+    if settings.update_nominal:
+        update = _update_nominal(meas, train, channels, base, info, transient_s, settle_s,
+                                 settings)
+        base = update.params
+        tick("nominal model updating")
+    model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
+                       channels=tuple(channels), transient_s=transient_s, settle_s=settle_s)
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 
@@ -170,8 +218,10 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                     "on most steps: the records start with a transient"},
         "channels": list(channels),
         "settings": asdict(settings),
+        "nominal_update": _update_summary(update),
     }
     tables = {"before": cmp0, "all": cmp_all}
+    result["_base"] = base  # the updated nominal rotor (not in the JSON document)
     if e0 <= settings.no_gap_per_feature and not exhaustive:
         result["verdict"] = "no-gap"
         result["_tables"] = tables

@@ -79,6 +79,32 @@ def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None)
     return doc
 
 
+def _update_html(upd) -> str:
+    """The nominal model update: what changed (model error, not an effect), how sure,
+    and what these data cannot tell apart."""
+    if not upd:
+        return ""
+    rows = [[r["label"], r["parameter"], quantity(r["nominal"]), quantity(r["updated"]),
+             (f"{100 * r['change']:+.1f} % +- {100 * r['std']:.1f} %" if r["log"] else
+              f"{np.degrees(r['change']):+.1f} deg +- {np.degrees(r['std']):.1f} deg"),
+             f"{r['resolution']:.2f}", "yes" if r["significant"] else ""]
+            for r in upd["parameters"]]
+    pairs = "".join(f"<li>{html.escape(p['a'])} and {html.escape(p['b'])} (correlation "
+                    f"{p['correlation']:+.2f})</li>" for p in upd["inseparable_pairs"])
+    mm = upd["mismatch_1x"]
+    listed = ("; ".join(upd["updates"]) if upd["updates"] else
+              "no parameter moved by more than twice its standard error")
+    heads = ["parameter", "name", "nominal", "updated", "change", "resolution (0-1)",
+             "significant"]
+    return (f"<h2>Nominal model updated (model error, not an effect)</h2>"
+            f"<p>{html.escape(listed)}. Relative 1x mismatch at the training speeds "
+            f"{100 * mm['before']:.2f} % before, {100 * mm['after']:.2f} % after. "
+            f"{html.escape(upd['method'])}.</p>{table(rows, heads)}"
+            "<p class=\"note\">Resolution: 1 - posterior/prior variance (0: the data say "
+            "nothing about it). Pairs these data cannot separate (only a combination is "
+            f"determined):</p><ul>{pairs or '<li>none</li>'}</ul>")
+
+
 def _label(effect):
     return effect if isinstance(effect, str) else " + ".join(effect)
 
@@ -114,10 +140,14 @@ def _html(doc, figs, prov):
     floor = float(doc["settings"]["no_gap_per_feature"])
     before = float(doc["gap_before"]["per_feature"])
     n_feat = doc.get("n_heldout_features")
+    upd = doc.get("nominal_update") or {}
+    updated = "updated " if upd else ""
     if verdict == "no-gap":
         headline = (f"The held-out gap after nuisance calibration, {before:.3g} per feature, "
                     f"is within the no-gap floor of {floor:.3g} (the 99 % level of "
-                    "effect-free sweeps): the nominal model explains these data.")
+                    f"effect-free sweeps): the {updated}nominal model explains these data"
+                    + (f" ({len(upd['updates'])} parameter(s) updated, listed below)."
+                       if upd.get("updates") else "."))
     elif verdict == "unexplained":
         headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
@@ -176,6 +206,7 @@ held out {len(split['heldout_speeds'])}; {len(doc['channels'])} channel(s)
 <h2>Where the model and the data disagree</h2>{where}
 <h2>Which effect explains it</h2>{which}
 {imgs}{narx}
+{_update_html(upd)}
 <h2>Nuisance calibration</h2>
 <p class="note">Global scalars fitted before any effect (nominal 1, phase 0); the candidates
 refit them with their own parameters.</p>

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 __all__ = ["DiagnosisSettings", "SEARCH_FIELDS"]
 
 #: the fields that change what a diagnosis computes (the others only read its results)
-SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s", "seed")
+SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
+                 "update_nominal", "update_max_nfev", "seed")
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,11 @@ class DiagnosisSettings:
     # simulations settled this long first: five time constants of the paper rotor's
     # slowest lightly damped mode (see RotorBearingSimulator.simulate)
     settle_s: float = 2.0
+    # update the nominal rotor's linear parameters on the training speeds' steady 1x
+    # before any effect is blamed (sknarx.gap.updating): what the update explains is
+    # model error and is reported as such
+    update_nominal: bool = True
+    update_max_nfev: int = 30
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
