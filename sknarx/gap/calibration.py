@@ -184,6 +184,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     speed_idx = np.searchsorted(speeds, np.array([k[0] for k in keys]))
     order_k = np.array([_ORDER_K.get(k[3], 0.0) for k in keys])
     size = 2 * len(keys)
+    project = _projection(classes, keys, order_k, Mc, se_m)
 
     def residual(x):
         nuis, effects = _decode(x, classes, log)
@@ -191,10 +192,26 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
+            Sc, _ = project(Sc, se_s)
             r = fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k)
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             return np.full(size, 1e3)
         return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
+
+    def finish(x, std, cost, success):
+        """The calibration at ``x``, with the projected effects' closed-form values."""
+        cal = _calibration(x, classes, log, std, cost, success)
+        if project.active:
+            nuis, effects = _decode(x, classes, log)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
+            _, vectors = project(Sc, se_s)
+            for i, cls in enumerate(classes):
+                if getattr(cls, "projected_orders", None):
+                    cal.effect_params[i] = {"vectors": cls.from_projection(vectors).vectors}
+            cal.n_params += project.n_values
+        return cal
 
     def start_vector(start):
         x0 = np.array([v[3] for v in NUISANCE.values()] + [0.0] * (len(lo) - len(NUISANCE)))
@@ -219,7 +236,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         probes.sort(key=lambda p: p[0])
         x0s = [x for _, x in probes[:n_short]]
         if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)
-            return _calibration(probes[0][1], classes, log, {}, probes[0][0], False)
+            return finish(probes[0][1], {}, probes[0][0], False)
 
     def local(x0, nfev):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
@@ -231,8 +248,35 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         short = [local(x0, max(3, max_nfev // 4)) for x0 in x0s]
         x0s = [min(short, key=lambda r: r.cost).x]
     best = local(x0s[0], max_nfev)
-    return _calibration(best.x, classes, log, _std(best, log, names), float(2 * best.cost),
-                        bool(best.success))
+    return finish(best.x, _std(best, log, names), float(2 * best.cost), bool(best.success))
+
+
+def _projection(classes, keys, order_k, Mc, se_m):
+    """Closed-form fit of the effects whose parameters are constant per-channel order
+    vectors (``projected_orders``, e.g. probe runout): for given other parameters, the
+    weighted mean over the calibration speeds of measured minus simulated, per channel
+    and order, is the least-squares vector (variable projection)."""
+    orders = sorted({k for cls in classes for k in getattr(cls, "projected_orders", ())})
+    chans = np.array([k[2] for k in keys])
+    groups = [(ch, k, np.flatnonzero((chans == ch) & (order_k == k)))
+              for ch in dict.fromkeys(chans.tolist()) for k in orders]
+    groups = [g for g in groups if g[2].size]
+
+    def project(Sc, se_s):
+        vectors = {}
+        if not groups:
+            return Sc, vectors
+        Sc = Sc.copy()
+        w = 1.0 / np.maximum(se_m**2 + se_s**2, 1e-300)
+        for ch, k, idx in groups:
+            v = complex(np.sum(w[idx] * (Mc[idx] - Sc[idx])) / np.sum(w[idx]))
+            Sc[idx] += v
+            vectors.setdefault(ch, {})[k] = v
+        return Sc, vectors
+
+    project.active = bool(groups)
+    project.n_values = 2 * len(groups)  # real and imaginary part of each vector
+    return project
 
 
 def _calibration(x, classes, log, std, cost, success):

@@ -102,14 +102,16 @@ def _steady_1x(meas, speeds, channels):
 
 def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, settings):
     """Nominal model updating on the training speeds' steady 1x, simulated over exactly
-    the steady window the features were taken from."""
+    the steady window the features were taken from. Each probe's constant vector is
+    left out of it: a probe-specific vector the same at every speed is runout's to
+    explain, not the rotor's parameters'."""
     z, se = _steady_1x(meas, train, channels)
     skip = int(round(transient_s * info["fs"]))
     logger.info("updating the nominal rotor's parameters on the steady 1x of %d training "
                 "speeds", len(train))
     return update_nominal_model(
         z, np.maximum(se, 1e-12), train, channels, base=base,
-        max_nfev=settings.update_max_nfev,
+        max_nfev=settings.update_max_nfev, remove_constant=True,
         nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
                           "settle": settle_s + transient_s})
 
@@ -400,7 +402,8 @@ def _rank(results, E0, cmp0):
         shrink = _shrink(E0, E)
         out.append({
             "effect": names[0] if len(names) == 1 else list(names),
-            "params": cal.effect_params if len(names) > 1 else cal.effect_params[0],
+            "params": (_plain_params(names, cal.effect_params) if len(names) > 1 else
+                       _plain_params(names, cal.effect_params)[0]),
             "params_std": {k: v for k, v in cal.std.items() if not k.startswith("nuisance")},
             "nuisance": cal.nuisance,
             "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink,
@@ -413,6 +416,13 @@ def _rank(results, E0, cmp0):
         })
     out.sort(key=lambda r: r["score"])
     return out
+
+
+def _plain_params(names, effect_params):
+    """Each effect's fitted parameters as plain numbers (projected effects, such as the
+    per-probe runout vectors, through their ``to_dict``)."""
+    return [EFFECTS[n](**p).to_dict() if getattr(EFFECTS[n], "projected_orders", None)
+            else p for n, p in zip(names, effect_params, strict=True)]
 
 
 def _regions_after(where, cmp_after, cmp_before):

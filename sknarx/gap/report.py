@@ -118,6 +118,11 @@ def effect_parameters(effect, params) -> str:
     for name, values in zip(names, groups, strict=False):
         cls = EFFECTS.get(name)
         for key, value in values.items():
+            if isinstance(value, dict) and "1x_m" in value:  # a probe's runout vectors
+                parts.append(f"{key}: 1x {quantity(value['1x_m'], 'm')} at "
+                             f"{value['1x_deg']:.0f} deg, 2x {quantity(value['2x_m'], 'm')} "
+                             f"at {value['2x_deg']:.0f} deg")
+                continue
             if not isinstance(value, (int, float)):
                 parts.append(f"{key} {value}")
                 continue

@@ -199,7 +199,7 @@ class UpdateResult:
 def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None = None,
                          parameters=DEFAULT_PARAMETERS, model: str = "nonlinear",
                          rtol: float = 0.01, corr_limit: float = 0.9, max_nfev: int = 30,
-                         nonlinear_kwargs=None) -> UpdateResult:
+                         nonlinear_kwargs=None, remove_constant: bool = False) -> UpdateResult:
     """Update the nominal rotor so that its steady 1x matches measured 1x vectors.
 
     Parameters
@@ -229,6 +229,11 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         Budget of forward evaluations.
     nonlinear_kwargs : dict, optional
         Passed to :func:`nonlinear_1x` (``fs``, ``n_samples``, ``settle``).
+    remove_constant : bool
+        Fit only what varies with speed: the weighted mean over the speeds of each
+        channel's misfit is removed first. A constant 1x vector per probe (runout) is
+        then left to the effect that explains it, instead of being absorbed into the
+        rotor's parameters; the gap diagnosis does this.
 
     Returns
     -------
@@ -287,9 +292,17 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
     def sigma(f):
         return np.sqrt(se**2 + (rtol * np.abs(f)) ** 2)
 
+    def centre(d, s):
+        """Remove each channel's weighted mean over the speeds (if asked)."""
+        if not remove_constant:
+            return d
+        w = 1.0 / s**2
+        return d - (w * d).sum(axis=0) / w.sum(axis=0)
+
     def data_resid(theta, f=None):
         f = forward(theta) if f is None else f
-        d = ((z - f) / sigma(f)).ravel()
+        s = sigma(f)
+        d = (centre(z - f, s) / s).ravel()
         return np.r_[d.real, d.imag]
 
     def resid(theta):
@@ -305,7 +318,7 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         for i in range(len(spec)):
             t = theta.copy()
             t[i] += h
-            df = ((forward(t, "linear") - f0) / h / s0).ravel()
+            df = (centre(forward(t, "linear") - f0, s0) / h / s0).ravel()
             J[: 2 * z.size, i] = np.r_[-df.real, -df.imag]
         J[2 * z.size:] = np.diag(1.0 / prior)
         return J
@@ -344,7 +357,8 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
     table = pd.DataFrame(rows)
 
     def rel(f):
-        return float(np.linalg.norm(z - f) / max(np.linalg.norm(z), 1e-300))
+        d = centre(z - f, sigma(f))
+        return float(np.linalg.norm(d) / max(np.linalg.norm(z), 1e-300))
 
     return UpdateResult(
         params=_apply(base, spec, theta), table=table, correlated_pairs=pairs,

@@ -428,35 +428,71 @@ class SpeedFluctuation(Effect):
 # ---------------------------------------------------------------- measurement
 @dataclass(repr=False)
 class ProbeRunout(Effect):
-    """Slow-roll runout: a 1x vector fixed to the shaft, the same at every speed.
+    """Slow-roll runout: what each probe reads of its track, the same at every speed.
 
-    Adds ``amplitude cos(phi + phase)`` to x channels and ``amplitude sin(phi +
-    phase)`` to y channels of the probes at ``planes`` (mechanical and electrical
-    runout of the probe track). Signature: a 1x vector of constant amplitude and
-    phase (in the rotating frame), dominant at low speed where the response is small.
+    Mechanical and electrical runout of a probe track is fixed to the shaft, so it adds
+    to that probe's signal a 1x (and, for an out-of-round or scratched track, a 2x)
+    vector constant in amplitude and phase at every speed -- and each probe sees its
+    own track. Two forms:
+
+    * per probe, as the diagnosis fits it: ``vectors`` maps a channel (DOF name) to its
+      ``(v1, v2)`` complex vectors, m, adding ``Re(v1 e^{i phi}) + Re(v2 e^{2 i phi})``;
+      these enter the order features linearly and are solved in closed form for given
+      other parameters (``projected_orders``), not searched;
+    * one shared 1x vector (``amplitude``, ``phase``) on the probes at ``planes``:
+      ``amplitude cos(phi + phase)`` on x, ``amplitude sin(phi + phase)`` on y.
+
+    Both apply when given. Signature: a constant 1x (or 2x) vector per probe, dominant
+    at low speed where the response is small.
     """
 
-    amplitude: float = 10e-6
+    amplitude: float = 0.0
     phase: float = 0.0
     planes: tuple = ("O1", "A", "O2", "B")
+    vectors: dict = field(default_factory=dict)
     name = "runout"
-    bounds = {"amplitude": (0.0, 1e-4, "lin"), "phase": (-math.pi, math.pi, "lin")}
-    units = {"amplitude": "m", "phase": "rad"}
-    signature = "a constant 1x vector, dominant at low speed"
+    bounds = {}  # nothing searched: the per-probe vectors are solved in closed form
+    #: orders whose constant per-channel vectors the calibration solves in closed form
+    projected_orders = (1.0, 2.0)
+    units = {"amplitude": "m", "phase": "rad", "vectors": "m"}
+    signature = "a constant 1x (or 2x) vector per probe, dominant at low speed"
 
     @classmethod
     def from_vector(cls, x):
-        """The effect with its searched parameters from a calibration vector."""
-        return cls(amplitude=float(x[0]), phase=float(x[1]))
+        """No searched parameters: the per-probe vectors come from the projection."""
+        return cls()
+
+    @classmethod
+    def from_projection(cls, vectors):
+        """The effect with per-channel vectors ``{channel: {order: complex}}`` (m)."""
+        return cls(vectors={ch: (complex(v.get(1.0, 0.0)), complex(v.get(2.0, 0.0)))
+                            for ch, v in vectors.items()})
 
     def measure(self, table, rng):
         phi = np.asarray(table["phi"])
-        for plane in self.planes:
-            if "x" + plane in table:
-                table["x" + plane] = table["x" + plane] + self.amplitude * np.cos(phi + self.phase)
-            if "y" + plane in table:
-                table["y" + plane] = table["y" + plane] + self.amplitude * np.sin(phi + self.phase)
+        if self.amplitude:
+            for plane in self.planes:
+                if "x" + plane in table:
+                    table["x" + plane] = table["x" + plane] + self.amplitude * np.cos(
+                        phi + self.phase)
+                if "y" + plane in table:
+                    table["y" + plane] = table["y" + plane] + self.amplitude * np.sin(
+                        phi + self.phase)
+        for ch, (v1, v2) in self.vectors.items():
+            if ch in table:
+                table[ch] = table[ch] + np.real(v1 * np.exp(1j * phi)
+                                                + v2 * np.exp(2j * phi))
         return table
+
+    def to_dict(self) -> dict:
+        """Plain values: per-probe vectors as amplitude (m) and phase (deg) pairs."""
+        out = {}
+        if self.amplitude:
+            out.update(amplitude=self.amplitude, phase=self.phase)
+        for ch, (v1, v2) in self.vectors.items():
+            out[ch] = {"1x_m": abs(v1), "1x_deg": math.degrees(np.angle(v1)),
+                       "2x_m": abs(v2), "2x_deg": math.degrees(np.angle(v2))}
+        return out
 
 
 @dataclass(repr=False)
