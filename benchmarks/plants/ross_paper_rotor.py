@@ -27,12 +27,18 @@ Status (2026-11-22, not yet used by a benchmark or a test). Measured: about 3 s 
 step for 3 s simulated (10 substeps per 1 kHz sample); settled records (decay ratio
 1.06-1.29 with 1 s of settling below 210 rad/s). Against ``sknarx.rotor``'s nominal
 model at 90/150/210/270 rad/s the 1x differs by 35-180 % (complex) at the disks and
-40-170 % at the journals: this reading puts the first critical nearer 150 rad/s (disk
-1x 2.0 mm there against 1.05 mm). At 125 rad/s the integration diverges within 0.5 s
-(displacements grow from 5 mm to 1e19 m) with 10 or 20 substeps: the Hertzian remainder
-enters ROSS's Newmark explicitly (its Newton iteration holds the right-hand side fixed
-within a step), which is the first suspect. The fault models (ROSS's ``run_crack``,
-``run_misalignment``, ``run_rubbing``) are not wired in yet.
+40-170 % at the journals: the disks' 1x peaks near 147 rad/s at 2.5 mm (sknarx: 1.05 mm
+at 150 rad/s; the paper reports its first critical at 144.5 rad/s) -- this reading puts
+all damping in the bearings, as the paper's shaft and joint dampers have no place in a
+shaft of beam elements. At 125 rad/s the
+integration diverges about 0.45 s into the settling (the tilt at bearing A grows to
+0.02 rad, then explodes within 30 steps) with 10 or 20 substeps, 8, 12, 16 or 24
+pseudo-modes, and with or without rotary inertia on the journal masses: the Hertzian
+remainder enters ROSS's Newmark explicitly (its Newton iteration holds the right-hand
+side fixed within a step), which is the first suspect; a parametric resonance of the
+ball-passage stiffness variation (8 x 0.386 x 125 = 386 rad/s, twice a mode near
+193 rad/s) is the second. The fault models (ROSS's ``run_crack``, ``run_misalignment``,
+``run_rubbing``) are not wired in yet.
 """
 
 from __future__ import annotations
@@ -120,7 +126,7 @@ class RossPlant:
             diam = [d1, d1, d1, dj, d2, d2, d2]
             shaft = [rs.ShaftElement(L=float(b - a), idl=0.0, odl=float(d), material=steel)
                      for a, b, d in zip(_NODES[:-1], _NODES[1:], diam, strict=True)]
-            small = dict(Id=1e-3, Ip=2e-3)
+            small = dict(Id=0.0, Ip=0.0)  # lumped translational masses, as the paper
             disks = [rs.DiskElement(n=NODE["A"], m=p.m_journal, **small),
                      rs.DiskElement(n=NODE["O1"], m=p.m_disk, Id=p.J_diam, Ip=p.J_polar),
                      rs.DiskElement(n=NODE["O2"], m=p.m_disk, Id=p.J_diam, Ip=p.J_polar),
