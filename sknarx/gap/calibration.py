@@ -11,6 +11,8 @@ are searched in log10.
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -139,15 +141,40 @@ def _split_x(classes):
     return np.array(lo), np.array(hi), np.array(log), names
 
 
-def _decode(x, classes, log):
+def _decode(x, classes, log, combo=None):
+    """Nuisance values and effect objects of a search vector; ``combo`` holds each
+    class's discrete settings (e.g. a crack's station)."""
     vals = np.where(log, 10.0 ** x, x)
     nuis = vals[: len(NUISANCE)]
     effects, i = [], len(NUISANCE)
-    for cls in classes:
+    for c, cls in enumerate(classes):
         k = len(cls.bounds)
-        effects.append(cls.from_vector(vals[i : i + k]))
+        eff = cls.from_vector(vals[i : i + k])
+        if combo and combo[c]:
+            eff = dataclasses.replace(eff, **combo[c])
+        effects.append(eff)
         i += k
     return nuis, effects
+
+
+def _discrete_combos(classes, fixed):
+    """Every combination of the classes' discrete settings still to search (those in
+    ``fixed`` are held), as tuples of one dict per class."""
+    fixed = list(fixed) if fixed is not None else [None] * len(classes)
+    choices = []
+    for cls, held in zip(classes, fixed, strict=True):
+        options = getattr(cls, "discrete", {})
+        if held is not None or not options:
+            choices.append([held or {}])
+        else:
+            choices.append([dict(zip(options, v, strict=True))
+                            for v in itertools.product(*options.values())])
+    return list(itertools.product(*choices))
+
+
+def discrete_settings(cal, i, cls) -> dict:
+    """The discrete settings (e.g. the station) a calibration chose for class ``i``."""
+    return {k: cal.effect_params[i][k] for k in getattr(cls, "discrete", {})}
 
 
 def _measured_arrays(meas_feats, keys):
@@ -162,7 +189,8 @@ _ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nons
 
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
-              diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None) -> Calibration:
+              diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
+              fixed=None) -> Calibration:
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
@@ -174,6 +202,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     ``probe_from`` (index into the search vector) restricts the probes to the
     trailing parameters -- a pair warm-started from its leading effect's fit probes
     only the partner. ``max_nfev=0`` returns the best probe without a local run.
+    Discrete settings of an effect (``discrete``, e.g. a crack's station) are probed
+    in every combination with the same Sobol points, and the local runs keep the
+    combination of the probe they start from; ``fixed`` (one dict or None per class)
+    holds some of them (a pair keeps its leading effect's station).
     """
     from scipy.stats import qmc
 
@@ -185,9 +217,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     order_k = np.array([_ORDER_K.get(k[3], 0.0) for k in keys])
     size = 2 * len(keys)
     project = _projection(classes, keys, order_k, Mc, se_m)
+    combos = _discrete_combos(classes, fixed)
 
-    def residual(x):
-        nuis, effects = _decode(x, classes, log)
+    def residual(x, combo=combos[0]):
+        nuis, effects = _decode(x, classes, log, combo)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -198,11 +231,11 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             return np.full(size, 1e3)
         return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
 
-    def finish(x, std, cost, success):
+    def finish(x, std, cost, success, combo):
         """The calibration at ``x``, with the projected effects' closed-form values."""
-        cal = _calibration(x, classes, log, std, cost, success)
+        cal = _calibration(x, classes, log, std, cost, success, combo)
         if project.active:
-            nuis, effects = _decode(x, classes, log)
+            nuis, effects = _decode(x, classes, log, combo)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
@@ -221,34 +254,46 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             x0[: len(start)] = start[: len(x0)]
         return np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
-    x0s = [start_vector(s) for s in (starts or [None])]
+    x0s = [(start_vector(s), combos[0]) for s in (starts or [None])]
     j0 = len(NUISANCE) if probe_from is None else probe_from
     if classes and n_probe and j0 < len(lo):
-        base = x0s[0]
+        base = x0s[0][0]
         j = slice(j0, len(lo))
         unit = qmc.Sobol(len(lo) - j0, scramble=True, seed=seed).random(n_probe)
         probes = []
-        for u in unit:
-            x = base.copy()
-            x[j] = lo[j] + u * (hi[j] - lo[j])
-            probes.append((float(np.sum(residual(x) ** 2)), x))
-        probes.append((float(np.sum(residual(base) ** 2)), base))
+        for combo in combos:
+            for u in unit:
+                x = base.copy()
+                x[j] = lo[j] + u * (hi[j] - lo[j])
+                probes.append((float(np.sum(residual(x, combo) ** 2)), x, combo))
+            probes.append((float(np.sum(residual(base, combo) ** 2)), base, combo))
         probes.sort(key=lambda p: p[0])
-        x0s = [x for _, x in probes[:n_short]]
+        # each discrete setting gets its own leading starts: a wrong station's probes
+        # can all undercut the right one's before any local run (crack trial 5068: the
+        # O2-B probes lead, A-O1's fourth-best converges to 1/12 of their cost)
+        x0s = [(x, combo) for combo in combos
+               for _, x, _ in [p for p in probes if p[2] is combo][:n_short]]
         if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)
-            return finish(probes[0][1], {}, probes[0][0], False)
+            return finish(probes[0][1], {}, probes[0][0], False, probes[0][2])
+    elif len(combos) > 1:  # no probes: each discrete setting scored at the start
+        x0 = x0s[0][0]
+        x0s = [min(((x0, c) for c in combos),
+                   key=lambda xc: float(np.sum(residual(*xc) ** 2)))]
 
-    def local(x0, nfev):
+    def local(x0, nfev, combo):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
-                             diff_step=diff_step, max_nfev=nfev)
+                             diff_step=diff_step, max_nfev=nfev, args=(combo,))
 
     if len(x0s) > 1:
         # the cheapest probe is often in the wrong basin of a periodic parameter: a short
         # run from each of the leading starts, then the best of them runs to the end
-        short = [local(x0, max(3, max_nfev // 4)) for x0 in x0s]
-        x0s = [min(short, key=lambda r: r.cost).x]
-    best = local(x0s[0], max_nfev)
-    return finish(best.x, _std(best, log, names), float(2 * best.cost), bool(best.success))
+        short = [(local(x0, max(3, max_nfev // 4), combo), combo) for x0, combo in x0s]
+        res, combo = min(short, key=lambda rc: rc[0].cost)
+        x0s = [(res.x, combo)]
+    x0, combo = x0s[0]
+    best = local(x0, max_nfev, combo)
+    return finish(best.x, _std(best, log, names), float(2 * best.cost), bool(best.success),
+                  combo)
 
 
 def _projection(classes, keys, order_k, Mc, se_m):
@@ -279,11 +324,13 @@ def _projection(classes, keys, order_k, Mc, se_m):
     return project
 
 
-def _calibration(x, classes, log, std, cost, success):
-    nuis, effects = _decode(x, classes, log)
+def _calibration(x, classes, log, std, cost, success, combo=None):
+    nuis, effects = _decode(x, classes, log, combo)
     return Calibration(
         names=tuple(c.name for c in classes),
-        effect_params=[{n: getattr(e, n) for n in type(e).bounds} for e in effects],
+        effect_params=[{n: getattr(e, n) for n in [*type(e).bounds,
+                                                   *getattr(type(e), "discrete", {})]}
+                       for e in effects],
         nuisance=dict(zip(NUISANCE, map(float, nuis), strict=True)),
         std=std, cost=cost, n_params=len(x), success=success, x=x)
 

@@ -34,7 +34,7 @@ from joblib import Parallel, delayed
 
 from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
-from .calibration import NUISANCE, SweepModel, calibrate, heldout_gap
+from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, heldout_gap
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import regions
 from .settings import DiagnosisSettings
@@ -285,28 +285,35 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         # what the best single effect leaves is still a gap: pair it with every other
         # candidate, warm-started from the lead's first fit (only the partner is probed)
 
+        # the leading effect keeps its discrete settings (a crack's station) in pairs
+        lead_fixed = discrete_settings(best["_cal"], 0, EFFECTS[lead])
+
         def probe_partner(partner):
             # an effect masked by a dominant one fits badly on its own: score each
             # candidate by probing it on top of the leading fit instead
             cal = calibrate(model, meas, train, [EFFECTS[lead], EFFECTS[partner]],
-                            starts=[lead_x], max_nfev=0, probe_from=len(lead_x))
+                            starts=[lead_x], max_nfev=0, probe_from=len(lead_x),
+                            fixed=[lead_fixed, None])
             return cal.cost, partner
 
         def run_pair(partner):
             classes = [EFFECTS[lead], EFFECTS[partner]]
             cal = calibrate(model, meas, train, classes, starts=[lead_x],
-                            max_nfev=settings.max_nfev, probe_from=len(lead_x))
+                            max_nfev=settings.max_nfev, probe_from=len(lead_x),
+                            fixed=[lead_fixed, None])
             return _held(classes, (lead, partner), cal)
 
-        def refit_member(names, x, member):
+        def refit_member(names, pair_cal, member):
             # one member of a pair, on its own, started from the pair's fit
+            x = pair_cal.x
             k = len(NUISANCE)
             width = [len(EFFECTS[n].bounds) for n in names]
             i = k + sum(width[:member])
             start = np.concatenate([x[:k], x[i : i + width[member]]])
             classes = [EFFECTS[names[member]]]
             cal = calibrate(model, meas, train, classes, starts=[start],
-                            max_nfev=settings.max_nfev, n_probe=0)
+                            max_nfev=settings.max_nfev, n_probe=0,
+                            fixed=[discrete_settings(pair_cal, member, classes[0])])
             return _held(classes, (names[member],), cal)
 
         with warnings.catch_warnings():
@@ -324,7 +331,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
             if pairs:
                 top = _rank(pairs, E0, cmp0)[0]
                 refits = _parallel(settings, (delayed(refit_member)(top["_names"],
-                                                                    top["_cal"].x, m)
+                                                                    top["_cal"], m)
                                               for m in (0, 1)), 2, "pair members alone")
         for new in refits:
             singles = [new if old[0] == new[0] and new[2] < old[2] else old

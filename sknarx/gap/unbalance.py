@@ -392,14 +392,26 @@ def scores(pred: np.ndarray, truth: np.ndarray, threshold=6.0, phase_from=24.0,
                                                  axis=1)))}
 
 
+def _fold(model, campaign, condition, z, penalties):
+    """One leave-one-condition-out fold: refit without ``condition``, predict it."""
+    mask = np.array([x != condition for x in campaign.conditions])
+    fold = UnbalanceModel(model.rig, prior_width=model.prior_width).fit(
+        campaign.subset(mask), warm=model)
+    out = {}
+    for p in penalties:
+        u, v, _ = fold._one(z, penalty=p)
+        out[p] = (u, v)
+    return out
+
+
 def cross_validate_conditions(model: UnbalanceModel, campaign: Campaign, penalties,
-                              thresholds, progress=None) -> dict:
+                              thresholds, progress=None, n_jobs: int = 2) -> dict:
     """Leave-one-condition-out predictions of every labelled condition.
 
     Each fold recalibrates the whole model (rotor, correction, noise) without the held-out
     condition (its repeats and both speeds leave together), warm-started from ``model``.
     The penalty and the detection threshold act only at prediction, so every pair of the
-    grids is scored on the same folds.
+    grids is scored on the same folds. ``n_jobs`` worker processes run the folds.
 
     Returns
     -------
@@ -407,19 +419,23 @@ def cross_validate_conditions(model: UnbalanceModel, campaign: Campaign, penalti
         ``predictions[penalty]`` (n_labelled, 2) complex, ``variance[penalty]``,
         ``truth``, ``conditions`` and ``scores[(penalty, threshold)]``.
     """
+    from joblib import Parallel, delayed
+
     from .._progress import progress_bar
 
     keep = campaign.labeled & (np.asarray(campaign.block) != "baseline")
     lab = campaign.subset(keep)
     preds = {p: [] for p in penalties}
     var = {p: [] for p in penalties}
-    for c in progress_bar(lab.conditions, desc="leave-one-condition-out", unit="fold"):
-        mask = np.array([x != c for x in campaign.conditions])
-        fold = UnbalanceModel(model.rig, prior_width=model.prior_width).fit(
-            campaign.subset(mask), warm=model)
-        z = lab.z[lab.conditions.index(c)]
-        for p in penalties:
-            u, v, _ = fold._one(z, penalty=p)
+    # the folds are independent: two worker processes (the fits hold the GIL), results
+    # in condition order whatever finishes first
+    jobs = (delayed(_fold)(model, campaign, c, lab.z[lab.conditions.index(c)], penalties)
+            for c in lab.conditions)
+    results = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
+    for c, per_penalty in zip(lab.conditions, progress_bar(
+            results, total=len(lab.conditions), desc="leave-one-condition-out",
+            unit="fold"), strict=True):
+        for p, (u, v) in per_penalty.items():
             preds[p].append(u)
             var[p].append(v)
         if progress is not None:

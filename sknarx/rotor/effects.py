@@ -230,46 +230,91 @@ class Misalignment(Effect):
 
 @njit(nogil=True, cache=True)
 def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
-    dk, psi, a1 = p[0], p[1], p[2]
-    # deformation of segment A-O1 in the two planes (see matrices.py)
-    dx = q[2] - q[0] - a1 * q[5]
-    dy = q[3] - q[1] + a1 * q[4]
+    # p: lost stiffness, crack angle, then the cracked element's deformation in each
+    # plane as four (DOF index, coefficient) pairs: x plane from p[2], y plane from p[10]
+    dk, psi = p[0], p[1]
+    dx = 0.0
+    dy = 0.0
+    for k in range(4):
+        dx += p[3 + 2 * k] * q[int(p[2 + 2 * k])]
+        dy += p[11 + 2 * k] * q[int(p[10 + 2 * k])]
     nx, ny = math.cos(phi + psi), math.sin(phi + psi)
     xi = nx * dx + ny * dy
     # gravity-driven breathing (Mayes & Davies): fully open when the crack faces down
     h = 0.5 * (1.0 - math.cos(phi + psi + 0.5 * math.pi))
     f = dk * h * xi  # the cracked direction loses stiffness dk: add back dk*h*xi
     fx, fy = f * nx, f * ny
-    out[0] -= fx
-    out[2] += fx
-    out[5] -= a1 * fx
-    out[1] -= fy
-    out[3] += fy
-    out[4] += a1 * fy
+    for k in range(4):
+        out[int(p[2 + 2 * k])] += fx * p[3 + 2 * k]
+        out[int(p[10 + 2 * k])] += fy * p[11 + 2 * k]
+
+
+def _crack_element(station, params, dof):
+    """Stiffness of the cracked element's lateral mode and its deformation per plane.
+
+    The deformations are those of ``matrices.py``: a segment's deflection relative to
+    the tangent at its disk, and the joint's relative lateral displacement
+    ``w_O2 - w_O1 - d/2 (slope_O1 + slope_O2)``, on which the shaft through the joint
+    (12 E I / d^3 = k) and the contact stiffness kb act in parallel. Slopes are ``ty``
+    in the x-z plane and ``-tx`` in the y-z plane.
+    """
+    p = params
+    if station == "A-O1":
+        k = p.k1
+        x = {"xA": -1.0, "xO1": 1.0, "tyO1": -p.a1}
+        y = {"yA": -1.0, "yO1": 1.0, "txO1": p.a1}
+    elif station == "O2-B":
+        k = p.k2
+        x = {"xO2": -1.0, "tyO2": -p.b2, "xB": 1.0}
+        y = {"yO2": -1.0, "txO2": p.b2, "yB": 1.0}
+    elif station == "joint":
+        d = p.a2 - p.a1
+        k = p.k + p.kb
+        x = {"xO1": -1.0, "tyO1": -d / 2, "xO2": 1.0, "tyO2": -d / 2}
+        y = {"yO1": -1.0, "txO1": d / 2, "yO2": 1.0, "txO2": d / 2}
+    else:  # BreathingCrack checks its station when it is made
+        raise ValueError(f"Unknown crack station {station!r}.")
+    pairs = []
+    for plane in (x, y):
+        items = [(float(dof[n]), c) for n, c in plane.items()]
+        items += [(0.0, 0.0)] * (4 - len(items))  # padding: coefficient 0
+        pairs += [v for item in items for v in item]
+    return k, pairs
 
 
 @dataclass(repr=False)
 class BreathingCrack(Effect):
-    """Breathing transverse crack in shaft segment A-O1.
+    """Breathing transverse crack at one station of the shaft.
 
-    The segment loses a fraction ``depth`` of its stiffness ``k1`` in the
-    direction normal to the crack, which rotates with the shaft at angle
-    ``phi + angle``; gravity opens and closes it once per revolution with the
+    The cracked element (shaft segment A-O1, the bolted joint with the shaft through
+    it, or segment O2-B: ``station``) loses a fraction ``depth`` of its lateral
+    stiffness in the direction normal to the crack, which rotates with the shaft at
+    angle ``phi + angle``; gravity opens and closes it once per revolution with the
     breathing function ``h = (1 - cos(phi + angle + pi/2))/2`` (Mayes & Davies,
-    1984; Gasch, J. Sound Vib. 1993). Signature: 2x (and 3x) rising near half
-    the critical speed; a small 1x change.
+    1984; Gasch, J. Sound Vib. 1993). The station is searched as a discrete
+    parameter (``discrete``). Signature: 2x (and 3x) rising near half the critical
+    speed; a small 1x change.
     """
 
     depth: float = 0.1
     angle: float = 0.0
+    station: str = "A-O1"
     name = "crack"
+    STATIONS = ("A-O1", "joint", "O2-B")
     bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin")}
-    units = {"depth": "- (stiffness lost, open)", "angle": "rad"}
+    #: settings searched over a list rather than a range (the calibration probes each)
+    discrete = {"station": STATIONS}
+    units = {"depth": "- (stiffness lost, open)", "angle": "rad", "station": ""}
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
+    def __post_init__(self):
+        if self.station not in self.STATIONS:
+            raise ValueError(f"Unknown crack station {self.station!r}; one of "
+                             f"{', '.join(self.STATIONS)}.")
+
     def force_kernel(self, context):
-        p = np.array([self.depth * context.params.k1, self.angle, context.params.a1])
-        return _crack_kernel, p
+        k, pairs = _crack_element(self.station, context.params, context.dof_index)
+        return _crack_kernel, np.array([self.depth * k, self.angle, *pairs])
 
 
 @njit(nogil=True, cache=True)
