@@ -6,7 +6,7 @@ any clone, from any folder:
 It is the same as, from the repository root of a checkout with ``../shared`` beside it,
     sknarx unbalance --features ../shared/data/rk4-unbalance/features_1x.csv \\
                      --rotor examples/rk4/rotor.toml --out ub-out
-(the shipped file is byte-identical). About two minutes on two cores: most of it is the
+(the shipped file is byte-identical). About 80 s on two cores: most of it is the
 leave-one-condition-out cross-validation against the influence-coefficient and
 random-forest peers. Then it prints the cross-validated scores and the predictions.
 """
