@@ -371,3 +371,31 @@ def test_a_crack_is_found_at_its_station(station):
     assert got["station"] == station
     assert got["depth"] == pytest.approx(0.5, rel=0.25)
     assert abs(np.angle(np.exp(1j * (got["angle"] - 0.6)))) < 0.3
+
+
+@pytest.mark.slow
+def test_misalignment_is_found_at_the_bearing_end_it_acts_on():
+    from sknarx.gap.calibration import SweepModel, calibrate
+    from sknarx.rotor import (
+        EFFECTS,
+        MeasurementNoise,
+        Misalignment,
+        RotorBearingSimulator,
+        RotorParameters,
+    )
+
+    sim = RotorBearingSimulator(effects=[Misalignment(parallel=4e-4, at="B"),
+                                         MeasurementNoise(snr_db=35)], seed=5)
+    speeds = list(np.linspace(81.7, 276.5, 8).round(4))
+    tab = sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=0.0, progress=False)
+    measured, info = check_measured(tab[["speed", "t", "xO1", "yO1", "xB", "yB"]], None)
+    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
+                       channels=tuple(info["channels"]))
+    train = np.array(info["speeds"])[0::2]
+    meas = order_features(measured, info["channels"], 0.5)
+    cal0 = calibrate(model, meas, train, (), max_nfev=15)
+    cal = calibrate(model, meas, train, [EFFECTS["misalignment"]], starts=[cal0.x],
+                    max_nfev=15)
+    got = cal.effect_params[0]
+    assert got["at"] == "B"
+    assert got["parallel"] == pytest.approx(4e-4, rel=0.25)

@@ -61,11 +61,14 @@ class Effect:
     """Base class: an effect that does nothing. Override the hooks you need.
 
     Class attributes: ``name`` (canonical), ``bounds`` (``{param: (lo, hi, scale)}``
-    with scale ``'lin'`` or ``'log'``), ``signature`` (expected evidence).
+    with scale ``'lin'`` or ``'log'``), ``discrete`` (``{field: choices}``: settings the
+    calibration searches over a list, such as where the effect acts), ``signature``
+    (expected evidence).
     """
 
     name = "none"
     bounds: dict = {}
+    discrete: dict = {}  # {field: choices} searched over a list (a location, a station)
     units: dict = {}  # {param: SI unit, "-" for a ratio}
     signature = ""
 
@@ -140,6 +143,15 @@ class Effect:
         return f"{type(self).__name__}({body})"
 
 
+def _check_choice(effect, field_name):
+    """A discrete setting must be one of the effect's ``discrete`` choices."""
+    choices = type(effect).discrete[field_name]
+    value = getattr(effect, field_name)
+    if value not in choices:
+        raise ValueError(f"{type(effect).__name__}: {field_name}={value!r} is not one of "
+                         f"{', '.join(map(str, choices))}.")
+
+
 # ---------------------------------------------------------------- force kernels
 @njit(nogil=True, cache=True)
 def _rub_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
@@ -166,7 +178,7 @@ class Rub(Effect):
     ``mu F_n`` against the spin (Muszynska, *Rotordynamics*, 2005, ch. 7).
 
     Parameters: ``clearance`` (m), ``stiffness`` (N/m), ``friction`` (-), ``at``
-    (``'O1'`` or ``'O2'``).
+    (``'O1'`` or ``'O2'``, searched as a discrete parameter).
     """
 
     clearance: float = 5e-4
@@ -176,9 +188,13 @@ class Rub(Effect):
     name = "rub"
     bounds = {"clearance": (1e-4, 2e-3, "log"), "stiffness": (1e5, 1e8, "log"),
               "friction": (0.0, 0.3, "lin")}
-    units = {"clearance": "m", "stiffness": "N/m", "friction": "-"}
+    discrete = {"at": ("O1", "O2")}
+    units = {"clearance": "m", "stiffness": "N/m", "friction": "-", "at": ""}
     signature = ("amplitude clipped near the response peak; 2x, 3x and sub-synchronous "
                  "(1/2x, 1/3x) orders where the orbit exceeds the clearance")
+
+    def __post_init__(self):
+        _check_choice(self, "at")
 
     def force_kernel(self, context):
         ix, iy = context.dof_index["x" + self.at], context.dof_index["y" + self.at]
@@ -201,7 +217,8 @@ def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cove
 
 @dataclass(repr=False)
 class Misalignment(Effect):
-    """Coupling misalignment at bearing A (the drive end).
+    """Coupling misalignment at a bearing end (``at``: ``'A'``, the drive end, or ``'B'``;
+    searched as a discrete parameter).
 
     Phenomenological model after Redmond & Al-Hussain (J. Sound Vib. 2010): a
     flexible coupling of lateral stiffness ``k_c = 1e6 N/m`` and length
@@ -215,16 +232,22 @@ class Misalignment(Effect):
 
     parallel: float = 1e-4
     angular: float = 0.0
+    at: str = "A"
     name = "misalignment"
     bounds = {"parallel": (0.0, 1e-3, "lin"), "angular": (0.0, 5e-3, "lin")}
-    units = {"parallel": "m", "angular": "rad"}
-    signature = "2x at every speed (not growing with speed^2), strongest at bearing A; 1x offset"
+    discrete = {"at": ("A", "B")}
+    units = {"parallel": "m", "angular": "rad", "at": ""}
+    signature = ("2x at every speed (not growing with speed^2), strongest at the coupled "
+                 "bearing; 1x offset")
     K_C = 1e6
     L_C = 0.1
 
+    def __post_init__(self):
+        _check_choice(self, "at")
+
     def force_kernel(self, context):
-        p = np.array([context.dof_index["xA"], context.dof_index["yA"], self.K_C,
-                      self.parallel, self.angular, self.L_C], dtype=float)
+        p = np.array([context.dof_index["x" + self.at], context.dof_index["y" + self.at],
+                      self.K_C, self.parallel, self.angular, self.L_C], dtype=float)
         return _misalignment_kernel, p
 
 
@@ -308,9 +331,7 @@ class BreathingCrack(Effect):
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
     def __post_init__(self):
-        if self.station not in self.STATIONS:
-            raise ValueError(f"Unknown crack station {self.station!r}; one of "
-                             f"{', '.join(self.STATIONS)}.")
+        _check_choice(self, "station")
 
     def force_kernel(self, context):
         k, pairs = _crack_element(self.station, context.params, context.dof_index)
