@@ -283,11 +283,19 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         raise ValueError("Every prior_width must be positive.")
     nl_kw = dict(nonlinear_kwargs or {})
 
+    # the latest nonlinear sweep: least_squares asks for the Jacobian at the point whose
+    # residual it has just computed, and the Jacobian's weights need that sweep again
+    latest = {}
+
     def forward(theta, which=model):
         p = _apply(base, spec, theta)
         if which == "linear":
             return linear_1x(p, speeds, channels)
-        return nonlinear_1x(p, speeds, channels, **nl_kw)
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key not in latest:
+            latest.clear()
+            latest[key] = nonlinear_1x(p, speeds, channels, **nl_kw)
+        return latest[key]
 
     def sigma(f):
         return np.sqrt(se**2 + (rtol * np.abs(f)) ** 2)
