@@ -399,3 +399,24 @@ def test_misalignment_is_found_at_the_bearing_end_it_acts_on():
     got = cal.effect_params[0]
     assert got["at"] == "B"
     assert got["parallel"] == pytest.approx(4e-4, rel=0.25)
+
+
+def test_a_partner_solved_in_closed_form_is_scored_without_a_local_run():
+    """Pair probing (max_nfev=0) with a partner that has nothing to probe -- the
+    per-probe runout -- scores the start instead of asking least_squares for 0 steps."""
+    from sknarx.gap.calibration import SweepModel, calibrate
+    from sknarx.rotor import EFFECTS, RotorParameters
+
+    measured, _ = make_trial("runout", 3, speeds=SPEEDS[:4], n_samples=600)
+    measured, info = check_measured(measured, None)
+    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
+                       channels=tuple(info["channels"]))
+    train = np.array(info["speeds"])[0::2]
+    meas = order_features(measured, info["channels"], 0.5)
+    cal0 = calibrate(model, meas, train, (), max_nfev=3)
+    lead_x = np.r_[cal0.x, 0.05, 0.0]  # nuisances, then a small crack (depth, angle)
+    probe = calibrate(model, meas, train, [EFFECTS["crack"], EFFECTS["runout"]],
+                      starts=[lead_x], max_nfev=0, probe_from=len(lead_x),
+                      fixed=[{"station": "A-O1"}, None])
+    assert np.isfinite(probe.cost) and probe.cost < cal0.cost  # the runout is solved
+    assert set(probe.effect_params[1]["vectors"]) == set(info["channels"])

@@ -279,6 +279,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         x0 = x0s[0][0]
         x0s = [min(((x0, c) for c in combos),
                    key=lambda xc: float(np.sum(residual(*xc) ** 2)))]
+    if max_nfev == 0:  # nothing to probe (e.g. a partner solved in closed form): the start
+        x0, combo = x0s[0]
+        return finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
 
     def local(x0, nfev, combo):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
