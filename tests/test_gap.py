@@ -340,6 +340,25 @@ def test_each_probe_has_its_own_runout_with_a_2x_and_it_is_found_per_probe():
             assert abs(got - v) < tol, (ch, k, got, v, tol)
 
 
+def _fit_one_effect(effect, channels, n_speeds, seed, name):
+    """Simulate a sweep with ``effect`` (SNR 35 dB) and calibrate the library's ``name``
+    on it, after the nuisance-only fit; returns the fitted effect parameters."""
+    from sknarx.gap.calibration import SweepModel, calibrate
+    from sknarx.rotor import EFFECTS, MeasurementNoise, RotorBearingSimulator, RotorParameters
+
+    sim = RotorBearingSimulator(effects=[effect, MeasurementNoise(snr_db=35)], seed=seed)
+    speeds = list(np.linspace(81.7, 276.5, n_speeds).round(4))
+    tab = sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=0.0, progress=False)
+    measured, info = check_measured(tab[["speed", "t", *channels]], None)
+    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
+                       channels=tuple(info["channels"]))
+    train = np.array(info["speeds"])[0::2]
+    meas = order_features(measured, info["channels"], 0.5)
+    cal0 = calibrate(model, meas, train, (), max_nfev=15)
+    return calibrate(model, meas, train, [EFFECTS[name]], starts=[cal0.x],
+                     max_nfev=15).effect_params[0]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("station", ["O2-B"])
 def test_a_crack_is_found_at_its_station(station):
@@ -347,27 +366,10 @@ def test_a_crack_is_found_at_its_station(station):
     O2-B) is searched as a discrete parameter, and found. (A-O1: the test above. A crack
     through the joint is not testable on this rotor: the joint is ~300 times stiffer
     than a segment, and losing half of it moves the 2x at O1 by < 0.1 um.)"""
-    from sknarx.gap.calibration import SweepModel, calibrate
-    from sknarx.rotor import (
-        EFFECTS,
-        BreathingCrack,
-        MeasurementNoise,
-        RotorBearingSimulator,
-        RotorParameters,
-    )
+    from sknarx.rotor import BreathingCrack
 
-    true = BreathingCrack(depth=0.5, angle=0.6, station=station)
-    sim = RotorBearingSimulator(effects=[true, MeasurementNoise(snr_db=35)], seed=2)
-    speeds = list(np.linspace(81.7, 276.5, 10).round(4))
-    tab = sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=0.0, progress=False)
-    measured, info = check_measured(tab[["speed", "t", "xO1", "yO1", "xA", "yA"]], None)
-    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(info["channels"]))
-    train = np.array(info["speeds"])[0::2]
-    meas = order_features(measured, info["channels"], 0.5)
-    cal0 = calibrate(model, meas, train, (), max_nfev=15)
-    cal = calibrate(model, meas, train, [EFFECTS["crack"]], starts=[cal0.x], max_nfev=15)
-    got = cal.effect_params[0]
+    got = _fit_one_effect(BreathingCrack(depth=0.5, angle=0.6, station=station),
+                          ("xO1", "yO1", "xA", "yA"), 10, 2, "crack")
     assert got["station"] == station
     assert got["depth"] == pytest.approx(0.5, rel=0.25)
     assert abs(np.angle(np.exp(1j * (got["angle"] - 0.6)))) < 0.3
@@ -375,28 +377,10 @@ def test_a_crack_is_found_at_its_station(station):
 
 @pytest.mark.slow
 def test_misalignment_is_found_at_the_bearing_end_it_acts_on():
-    from sknarx.gap.calibration import SweepModel, calibrate
-    from sknarx.rotor import (
-        EFFECTS,
-        MeasurementNoise,
-        Misalignment,
-        RotorBearingSimulator,
-        RotorParameters,
-    )
+    from sknarx.rotor import Misalignment
 
-    sim = RotorBearingSimulator(effects=[Misalignment(parallel=4e-4, at="B"),
-                                         MeasurementNoise(snr_db=35)], seed=5)
-    speeds = list(np.linspace(81.7, 276.5, 8).round(4))
-    tab = sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=0.0, progress=False)
-    measured, info = check_measured(tab[["speed", "t", "xO1", "yO1", "xB", "yB"]], None)
-    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(info["channels"]))
-    train = np.array(info["speeds"])[0::2]
-    meas = order_features(measured, info["channels"], 0.5)
-    cal0 = calibrate(model, meas, train, (), max_nfev=15)
-    cal = calibrate(model, meas, train, [EFFECTS["misalignment"]], starts=[cal0.x],
-                    max_nfev=15)
-    got = cal.effect_params[0]
+    got = _fit_one_effect(Misalignment(parallel=4e-4, at="B"), ("xO1", "yO1", "xB", "yB"),
+                          8, 5, "misalignment")
     assert got["at"] == "B"
     assert got["parallel"] == pytest.approx(4e-4, rel=0.25)
 
