@@ -202,18 +202,28 @@ def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes
 
 
 @pytest.mark.slow
-def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
-    # seed 5068 of the blind benchmark: the cheapest Sobol probe sits near angle pi
-    # and converges there (cost ~6,200); the true basin is near 0 (cost ~290)
-    from sknarx.gap.calibration import SweepModel, calibrate
-    from sknarx.rotor import EFFECTS, RotorParameters
+def _calibration_setup(measured):
+    """What a calibration needs from measured records started from rest: the nominal
+    sweep model, the order features and the training speeds (every other step)."""
+    from sknarx.gap.calibration import SweepModel
+    from sknarx.rotor import RotorParameters
 
-    measured, truth = make_trial("crack", 5068)
     measured, info = check_measured(measured, None)
     model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
                        channels=tuple(info["channels"]))
     train = np.array(info["speeds"])[0::2]
     meas = order_features(measured, info["channels"], 0.5)
+    return model, meas, train, info["channels"]
+
+
+def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
+    # seed 5068 of the blind benchmark: the cheapest Sobol probe sits near angle pi
+    # and converges there (cost ~6,200); the true basin is near 0 (cost ~290)
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS
+
+    measured, truth = make_trial("crack", 5068)
+    model, meas, train, _ = _calibration_setup(measured)
     cal0 = calibrate(model, meas, train, (), max_nfev=15)
     # the station is held (its search is tested below): this is about the angle's basin
     cal = calibrate(model, meas, train, [EFFECTS["crack"]], starts=[cal0.x], max_nfev=15,
@@ -343,17 +353,13 @@ def test_each_probe_has_its_own_runout_with_a_2x_and_it_is_found_per_probe():
 def _fit_one_effect(effect, channels, n_speeds, seed, name):
     """Simulate a sweep with ``effect`` (SNR 35 dB) and calibrate the library's ``name``
     on it, after the nuisance-only fit; returns the fitted effect parameters."""
-    from sknarx.gap.calibration import SweepModel, calibrate
-    from sknarx.rotor import EFFECTS, MeasurementNoise, RotorBearingSimulator, RotorParameters
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS, MeasurementNoise, RotorBearingSimulator
 
     sim = RotorBearingSimulator(effects=[effect, MeasurementNoise(snr_db=35)], seed=seed)
     speeds = list(np.linspace(81.7, 276.5, n_speeds).round(4))
     tab = sim.sweep(speeds, fs=1000.0, n_samples=1000, settle=0.0, progress=False)
-    measured, info = check_measured(tab[["speed", "t", *channels]], None)
-    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(info["channels"]))
-    train = np.array(info["speeds"])[0::2]
-    meas = order_features(measured, info["channels"], 0.5)
+    model, meas, train, _ = _calibration_setup(tab[["speed", "t", *channels]])
     cal0 = calibrate(model, meas, train, (), max_nfev=15)
     return calibrate(model, meas, train, [EFFECTS[name]], starts=[cal0.x],
                      max_nfev=15).effect_params[0]
@@ -388,19 +394,15 @@ def test_misalignment_is_found_at_the_bearing_end_it_acts_on():
 def test_a_partner_solved_in_closed_form_is_scored_without_a_local_run():
     """Pair probing (max_nfev=0) with a partner that has nothing to probe -- the
     per-probe runout -- scores the start instead of asking least_squares for 0 steps."""
-    from sknarx.gap.calibration import SweepModel, calibrate
-    from sknarx.rotor import EFFECTS, RotorParameters
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS
 
     measured, _ = make_trial("runout", 3, speeds=SPEEDS[:4], n_samples=600)
-    measured, info = check_measured(measured, None)
-    model = SweepModel(base=RotorParameters(), fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(info["channels"]))
-    train = np.array(info["speeds"])[0::2]
-    meas = order_features(measured, info["channels"], 0.5)
+    model, meas, train, channels = _calibration_setup(measured)
     cal0 = calibrate(model, meas, train, (), max_nfev=3)
     lead_x = np.r_[cal0.x, 0.05, 0.0]  # nuisances, then a small crack (depth, angle)
     probe = calibrate(model, meas, train, [EFFECTS["crack"], EFFECTS["runout"]],
                       starts=[lead_x], max_nfev=0, probe_from=len(lead_x),
                       fixed=[{"station": "A-O1"}, None])
     assert np.isfinite(probe.cost) and probe.cost < cal0.cost  # the runout is solved
-    assert set(probe.effect_params[1]["vectors"]) == set(info["channels"])
+    assert set(probe.effect_params[1]["vectors"]) == set(channels)

@@ -37,8 +37,9 @@ pseudo-modes, and with or without rotary inertia on the journal masses: the Hert
 remainder enters ROSS's Newmark explicitly (its Newton iteration holds the right-hand
 side fixed within a step), which is the first suspect; a parametric resonance of the
 ball-passage stiffness variation (8 x 0.386 x 125 = 386 rad/s, twice a mode near
-193 rad/s) is the second. The fault models (ROSS's ``run_crack``, ``run_misalignment``,
-``run_rubbing``) are not wired in yet.
+193 rad/s) is the second. With only 0.5 s of settling (the loads faded in over 0.15 s)
+it also fails at 150 rad/s; 2 s works there. The fault models (ROSS's ``run_crack``,
+``run_misalignment``, ``run_rubbing``) are not wired in yet.
 """
 
 from __future__ import annotations
@@ -94,8 +95,8 @@ def _hertz(x, y, cage_angle, p):
 
 
 def _static_stiffness(load, p):
-    """Journal deflection (m, negative: down) carrying ``load`` (N, the weight on the
-    bearing) and the tangent stiffness there (N/m), averaged over the cage angle."""
+    """Tangent stiffness (N/m) of a bearing carrying ``load`` (N, the weight on it), at
+    the journal's static deflection, averaged over the cage angle."""
     from scipy.optimize import brentq
 
     def fy(y):
@@ -104,7 +105,7 @@ def _static_stiffness(load, p):
 
     y0 = brentq(lambda y: fy(y) - load, -1e-3, -p.clearance)
     h = 1e-9
-    return y0, -(fy(y0 + h) - fy(y0 - h)) / (2 * h)  # the support stiffens downward
+    return -(fy(y0 + h) - fy(y0 - h)) / (2 * h)  # the support stiffens downward
 
 
 class RossPlant:
@@ -142,9 +143,8 @@ class RossPlant:
             total = fy.sum()
             load_b = float(np.sum(fy * _NODES) / _NODES[-1])
             self.load = {"A": total - load_b, "B": load_b}
-            self.k_lin, self.y_static = {}, {}
-            for b in ("A", "B"):
-                self.y_static[b], self.k_lin[b] = _static_stiffness(self.load[b], p)
+            # the bearings' tangent stiffness at their static load, for the integrator
+            self.k_lin = {b: _static_stiffness(self.load[b], p) for b in ("A", "B")}
             brg = [rs.BearingElement(n=NODE[b], kxx=self.k_lin[b], cxx=p.c_bearing,
                                      kzz=1e8, czz=1e3) for b in ("A", "B")]
             self.rotor = rs.Rotor(shaft, disks, brg)
