@@ -185,6 +185,15 @@ def _measured_arrays(meas_feats, keys):
     return m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy()
 
 
+def _model_tol(meas_feats, keys):
+    """The measured features' model-form tolerance (see ``gapmap.compare``), or None."""
+    if "model_tol" not in meas_feats.columns:
+        return None
+    m = meas_feats.set_index(["speed", "window", "channel", "feature"]).reindex(
+        pd.MultiIndex.from_tuples(keys))
+    return m["model_tol"].fillna(0.0).to_numpy(dtype=float)
+
+
 _ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nonsync: 0
 
 
@@ -213,6 +222,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     speeds = np.asarray(speeds, dtype=float)
     keys, _, _, nons = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
     Mc, se_m = _measured_arrays(meas_feats, keys)
+    tol = _model_tol(meas_feats, keys)
     speed_idx = np.searchsorted(speeds, np.array([k[0] for k in keys]))
     order_k = np.array([_ORDER_K.get(k[3], 0.0) for k in keys])
     size = 2 * len(keys)
@@ -226,7 +236,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                 warnings.simplefilter("ignore")
                 _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
             Sc, _ = project(Sc, se_s)
-            r = fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k)
+            r = fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, model_tol=tol)
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             return np.full(size, 1e3)
         return r if np.all(np.isfinite(r)) else np.full(size, 1e3)

@@ -38,7 +38,7 @@ from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, hel
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import regions
 from .settings import DiagnosisSettings
-from .updating import update_nominal_model
+from .updating import linear_1x, update_nominal_model
 
 __all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
 
@@ -107,6 +107,15 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
     explain, not the rotor's parameters'."""
     z, se = _steady_1x(meas, train, channels)
     skip = int(round(transient_s * info["fs"]))
+    # where the keyphasor sits on the shaft is arbitrary: the unbalance angle starts
+    # from the measured 1x phase against the linearised nominal rotor's, so that the
+    # update's prior on it is about the rig, not about the notch. Weighted by amplitude
+    # (the largest responses decide), not by standard error: the journals' small 1x
+    # has the smallest errors and the largest model-form phase error
+    f0 = linear_1x(base, train, channels)
+    dphi = float(np.angle(np.sum(z * np.conj(f0))))
+    base = base.replace(unbalance_phase=float(np.angle(np.exp(1j * (base.unbalance_phase
+                                                                    + dphi)))))
     logger.info("updating the nominal rotor's parameters on the steady 1x of %d training "
                 "speeds", len(train))
     return update_nominal_model(
@@ -114,6 +123,20 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
         max_nfev=settings.update_max_nfev, remove_constant=True,
         nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
                           "settle": settle_s + transient_s})
+
+
+def _with_model_tolerance(meas, update, rtol=0.01):
+    """The measured features with each channel's 1x model-form tolerance from the
+    update: what the updated model cannot follow on a channel's 1x over the training
+    speeds (beyond the comparison's own ``rtol``; a constant per-probe vector excluded)
+    is model error, not evidence for an effect. Harmonics, sub-harmonics and
+    non-synchronous lines keep no such allowance: they are what effects must explain."""
+    tol = update.mismatch.get("model_tolerance", {})
+    extra = {c: float(np.sqrt(max(t * t - rtol * rtol, 0.0))) for c, t in tol.items()}
+    out = meas.copy()
+    out["model_tol"] = np.where(out["feature"] == "1x", out["channel"].map(extra).fillna(0.0),
+                                0.0)
+    return out
 
 
 def _update_summary(update) -> dict | None:
@@ -125,7 +148,8 @@ def _update_summary(update) -> dict | None:
         "parameters": update.table.to_dict(orient="records"),
         "inseparable_pairs": [{"a": a, "b": b, "correlation": c}
                               for a, b, c in update.correlated_pairs],
-        "mismatch_1x": update.mismatch,
+        "mismatch_1x": {k: v for k, v in update.mismatch.items() if k != "model_tolerance"},
+        "model_tolerance_1x": update.mismatch.get("model_tolerance", {}),
         "chi2": update.cost,
         "method": "regularised toward nominal (log-scale priors), nonlinear steady 1x at "
                   "the training speeds, sensitivities from the linearised rotor",
@@ -183,6 +207,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         update = _update_nominal(meas, train, channels, base, info, transient_s, settle_s,
                                  settings)
         base = update.params
+        meas = _with_model_tolerance(meas, update)
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
                        channels=tuple(channels), transient_s=transient_s, settle_s=settle_s)
