@@ -1,0 +1,242 @@
+"""Blind trials from three plant families, drawn the same way for each (issue #13).
+
+A trial is a draw -- the effect(s) or none, their physical parameters, a rig-like
+per-element mismatch, noise and keyphasor jitter -- that each family turns into a
+stepped, settled sweep in the measured-file format through its own simulation code:
+
+* ``own``: ``sknarx.rotor.RotorBearingSimulator`` with its own effect kernels (the
+  "own-model" upper bound);
+* ``second``: ``plants.second_derivation`` (housings with mass, other readings of the
+  paper, effects written from their sources);
+* ``ross``: ``plants.ross_paper_rotor`` (ROSS finite elements and integrator, ROSS's
+  crack, misalignment and rubbing models).
+
+The measurement chain (per-probe runout, a line-frequency pickup, noise, jitter) is
+written here, once, for all families. What a family cannot express is listed in
+``UNSUPPORTED`` and not drawn for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+CHANNELS = ("xO1", "yO1", "xA", "yA", "xB", "yB")
+SPEEDS = tuple(np.linspace(81.7, 276.5, 10).round(4))
+LIB = ["rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "runout",
+       "speed-fluctuation"]
+PAIRS = [("crack", "runout"), ("anisotropy", "runout"), ("clearance", "misalignment"),
+         ("crack", "speed-fluctuation")]
+OUT = ["line-frequency", "thermal-bow", "gear-mesh"]
+MEASUREMENT = ("runout", "line-frequency")
+FAMILIES = ("own", "second", "ross")
+#: what a family cannot express: sknarx's simulator has no gear mesh (kept out of the
+#: own family, whose out-of-library effects are the line pickup and the thermal bow);
+#: ROSS has no joint looseness (see plants.ross_paper_rotor)
+UNSUPPORTED = {"own": {"gear-mesh"}, "second": set(), "ross": {"looseness"}}
+
+
+def _log_uniform(rng, a, b):
+    return float(10 ** rng.uniform(np.log10(a), np.log10(b)))
+
+
+def draw_effect(name, rng):
+    """Physical parameters of one effect (SI, family-independent)."""
+    u = rng.uniform
+    if name == "crack":
+        return {"depth": u(0.15, 0.5), "angle": u(-np.pi, np.pi),
+                "station": str(rng.choice(["A-O1", "O2-B"]))}
+    if name == "rub":
+        return {"clearance": u(6e-4, 9.5e-4), "stiffness": _log_uniform(rng, 1e6, 1e7),
+                "friction": u(0.0, 0.2), "at": str(rng.choice(["O1", "O2"]))}
+    if name == "misalignment":
+        return {"parallel": u(1e-4, 6e-4), "angular": u(0.0, 2e-3),
+                "at": str(rng.choice(["A", "B"]))}
+    if name == "looseness":
+        return {"residual": _log_uniform(rng, 1e-3, 2e-2), "gap": u(0.0, 4e-6)}
+    if name == "clearance":
+        return {"clearance": _log_uniform(rng, 8e-6, 4e-5)}
+    if name == "anisotropy":
+        soft = _log_uniform(rng, 5e6, 5e7)
+        return {"soft": soft, "soft_axis": str(rng.choice(["x", "y"]))}
+    if name == "speed-fluctuation":
+        return {"amplitude": u(0.005, 0.03), "frequency_hz": _log_uniform(rng, 1.0, 8.0)}
+    if name == "runout":
+        return {ch: [u(5e-6, 4e-5), u(-np.pi, np.pi), u(0.0, 0.3), u(-np.pi, np.pi)]
+                for ch in CHANNELS}
+    if name == "line-frequency":
+        return {"amplitude": u(1e-5, 5e-5), "frequency_hz": 50.0}
+    if name == "thermal-bow":
+        return {"bow": u(5e-5, 2e-4), "angle": u(-np.pi, np.pi)}
+    if name == "gear-mesh":
+        return {"force": u(20.0, 100.0), "angle": u(-np.pi, np.pi)}
+    raise ValueError(f"unknown effect {name!r}")
+
+
+def draw_trial(kind, seed, family):
+    """The withheld truth of one trial: effects, mismatch, noise, jitter."""
+    rng = np.random.default_rng([seed, FAMILIES.index(family)])
+    names = () if kind is None else ((kind,) if isinstance(kind, str) else tuple(kind))
+    u = rng.uniform
+    mismatch = {"k1": u(0.95, 1.05), "k2": u(0.95, 1.05),
+                **{c: u(0.8, 1.2) for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
+                "kB_A": u(0.8, 1.2), "kB_B": u(0.8, 1.2),
+                "e_O1": u(0.9, 1.1), "e_O2": u(0.9, 1.1),
+                "unbalance_phase": u(-np.pi, np.pi), "beta_error": np.radians(u(-10, 10))}
+    return {"kind": "none" if not names else (names[0] if len(names) == 1 else list(names)),
+            "family": family, "seed": seed,
+            "effects": {n: draw_effect(n, rng) for n in names},
+            "mismatch": mismatch, "snr_db": u(20.0, 40.0),
+            "jitter_deg": u(-2.0, 2.0, len(SPEEDS)).tolist(),
+            "noise_seed": int(rng.integers(2**31)),
+            "in_library": all(n in LIB for n in names)}
+
+
+# ------------------------------------------------------------------ the families
+def _own_sweep(truth, physical, settle):
+    from sknarx.rotor import EFFECTS, RotorBearingSimulator, RotorParameters
+
+    m, b = truth["mismatch"], RotorParameters()
+    # one eccentricity in sknarx's rotor: the disks' mean, their difference as a phase
+    params = b.replace(
+        k1=b.k1 * m["k1"], k2=b.k2 * m["k2"],
+        **{c: getattr(b, c) * m[c] for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
+        kB=b.kB * 0.5 * (m["kB_A"] + m["kB_B"]), e=b.e * 0.5 * (m["e_O1"] + m["e_O2"]),
+        unbalance_phase=m["unbalance_phase"], beta=b.beta + m["beta_error"])
+    effects = []
+    for name, p in physical.items():
+        if name == "crack":
+            effects.append(EFFECTS[name](depth=p["depth"], angle=p["angle"],
+                                         station=p["station"]))
+        elif name == "rub":
+            effects.append(EFFECTS[name](clearance=p["clearance"], stiffness=p["stiffness"],
+                                         friction=p["friction"], at=p["at"]))
+        elif name == "misalignment":
+            effects.append(EFFECTS[name](parallel=p["parallel"], angular=p["angular"],
+                                         at=p["at"]))
+        elif name == "looseness":
+            effects.append(EFFECTS[name](residual=p["residual"], gap=p["gap"]))
+        elif name == "clearance":
+            effects.append(EFFECTS[name](clearance=p["clearance"]))
+        elif name == "anisotropy":
+            # sknarx's support: series stiffness per direction (no pedestal mass)
+            stiff = 1e9
+            kx, ky = (p["soft"], stiff) if p["soft_axis"] == "x" else (stiff, p["soft"])
+            effects.append(EFFECTS[name](kx=kx, ky=ky))
+        elif name == "speed-fluctuation":
+            effects.append(EFFECTS[name](amplitude=p["amplitude"],
+                                         frequency=p["frequency_hz"]))
+        elif name == "thermal-bow":
+            from sknarx.gap.synthetic import ThermalBow
+
+            effects.append(ThermalBow(bow=p["bow"], angle=p["angle"]))
+    sim = RotorBearingSimulator(params, effects=effects)
+    return sim.sweep(list(SPEEDS), fs=1000.0, n_samples=1000, settle=settle, progress=False)
+
+
+def _second_sweep(truth, physical, settle):
+    from plants.second_derivation import SecondDerivationPlant, SecondRotor
+
+    m, r = truth["mismatch"], SecondRotor()
+    rotor = SecondRotor(
+        k1=r.k1 * m["k1"], k2=r.k2 * m["k2"],
+        **{c: getattr(r, c) * m[c] for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
+        kB_A=r.kB_A * m["kB_A"], kB_B=r.kB_B * m["kB_B"],
+        e_O1=r.e_O1 * m["e_O1"], e_O2=r.e_O2 * m["e_O2"],
+        phase_O1=m["unbalance_phase"], phase_O2=m["unbalance_phase"] + r.phase_O2
+        + m["beta_error"])
+    eff = {}
+    for name, p in physical.items():
+        if name == "crack":
+            # Mayes & Davies: lost stiffness ~ depth ratio (normal) and a quarter of it
+            eff[name] = [0 if p["station"] == "A-O1" else 1, 0.8 * p["depth"],
+                         0.2 * p["depth"], p["angle"]]
+        elif name == "rub":
+            eff[name] = [0 if p["at"] == "O1" else 1, p["clearance"], p["stiffness"],
+                         p["friction"]]
+        elif name == "misalignment":
+            # a flexible coupling of 5e5 N/m radial stiffness; the angular part acts
+            # through its 0.1 m half-length
+            kc_delta = 5e5 * (p["parallel"] + 0.1 * p["angular"])
+            eff[name] = [0 if p["at"] == "A" else 1, kc_delta, 0.0]
+        elif name == "looseness":
+            eff[name] = [p["residual"], p["gap"]]
+        elif name == "clearance":
+            eff[name] = [p["clearance"]]
+        elif name == "anisotropy":
+            eff[name] = ([p["soft"], rotor.k_py] if p["soft_axis"] == "x"
+                         else [rotor.k_px, p["soft"]])
+        elif name == "speed-fluctuation":
+            eff[name] = [p["amplitude"], 2 * np.pi * p["frequency_hz"]]
+        elif name == "thermal-bow":
+            eff[name] = [p["bow"], p["angle"]]
+        elif name == "gear-mesh":
+            eff[name] = [p["force"], p["angle"]]
+    rotor.effects = eff
+    return SecondDerivationPlant(rotor).sweep(SPEEDS, CHANNELS, settle=settle)
+
+
+def _ross_sweep(truth, physical, settle):
+    from plants.ross_paper_rotor import ross_sweep
+
+    return ross_sweep(truth, physical, SPEEDS, CHANNELS, settle=settle)
+
+
+_SWEEP = {"own": (_own_sweep, 2.0), "second": (_second_sweep, 1.5), "ross": (_ross_sweep, 1.0)}
+
+
+def measure(clean, truth):
+    """The measurement chain on a clean sweep: runout, line pickup, noise, jitter."""
+    rng = np.random.default_rng(truth["noise_seed"])
+    out = clean.copy()
+    t = out["t"].to_numpy()
+    phi = out["speed"].to_numpy() * t
+    ro = truth["effects"].get("runout")
+    lf = truth["effects"].get("line-frequency")
+    for ch in CHANNELS:
+        y = out[ch].to_numpy().copy()
+        if ro is not None:
+            a1, p1, r2, p2 = ro[ch]
+            y += a1 * np.cos(phi + p1) + r2 * a1 * np.cos(2 * phi + p2)
+        if lf is not None:
+            y += lf["amplitude"] * np.sin(2 * np.pi * lf["frequency_hz"] * t)
+        # noise at the drawn SNR of each channel's vibration (its mean removed per step)
+        ac = y - out.groupby("speed")[ch].transform("mean").to_numpy()
+        sigma = np.sqrt(np.mean(ac**2)) / 10 ** (truth["snr_db"] / 20)
+        out[ch] = y + rng.normal(0.0, sigma, y.size)
+    # keyphasor jitter: each step's time axis off by a few degrees of shaft angle
+    offs = dict(zip(SPEEDS, np.radians(truth["jitter_deg"]) / np.asarray(SPEEDS),
+                    strict=True))
+    out["t"] = out["t"] - out["speed"].map(offs)
+    return out
+
+
+def make_family_trial(kind, seed, family):
+    """Measured sweep, truth, and the clean sweeps with and without the effects."""
+    truth = draw_trial(kind, seed, family)
+    sweep, settle = _SWEEP[family]
+    physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
+    clean = sweep(truth, physical, settle)
+    clean_free = sweep(truth, {}, settle) if physical else clean
+    measured = measure(clean, truth)
+    # the clean truth for the oracle: the plant with its effects, measurement effects on
+    # top but no noise (the oracle knows every effect, not the noise)
+    no_noise = dict(truth, snr_db=400.0, jitter_deg=truth["jitter_deg"])
+    oracle = measure(clean, no_noise)
+    free = measure(clean_free, dict(no_noise, effects={}))
+    return measured[["speed", "t", *CHANNELS]], truth, oracle, free
+
+
+def feature_gap(measured, predicted, speeds):
+    """Held-out excess gap (the diagnosis's statistic) of ``predicted`` records."""
+    from sknarx.gap.features import order_features
+    from sknarx.gap.gapmap import compare, gap_statistic
+
+    m = order_features(measured, list(CHANNELS), 0.0)
+    p = order_features(predicted, list(CHANNELS), 0.0)
+    cmp = compare(m[m.speed.isin(speeds)], p[p.speed.isin(speeds)])
+    return gap_statistic(cmp), len(cmp)
+
+
+def as_frame(table):
+    return table if isinstance(table, pd.DataFrame) else pd.DataFrame(table)
