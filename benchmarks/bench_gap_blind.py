@@ -107,15 +107,21 @@ def code_hash():
 
 def plan(n, seed0, family):
     """A balanced list of (kind, seed): rounds of two effect-free trials, every library
-    effect, two pairs and every out-of-library effect the family can express."""
+    effect, two pairs and every out-of-library effect the family can express, each round
+    interleaved so that a short run already covers every category."""
     skip = UNSUPPORTED[family]
     lib = [k for k in LIB if k not in skip]
     out_ = [k for k in OUT if k not in skip]
     pairs = [p for p in PAIRS if not set(p) & skip]
     kinds, r = [], 0
     while len(kinds) < n:
-        kinds += [None] * 2 + lib + [pairs[(2 * r) % len(pairs)],
-                                     pairs[(2 * r + 1) % len(pairs)]] + out_
+        two = [pairs[(2 * r) % len(pairs)], pairs[(2 * r + 1) % len(pairs)]]
+        # effect-free, a single, a pair, an out-of-library, a single, ... in turn
+        queues = [[None, None], list(lib), two, list(out_)]
+        while any(queues):
+            for q in queues:
+                if q:
+                    kinds.append(q.pop(0))
         r += 1
     return [(k, seed0 + i) for i, k in enumerate(kinds[:n])]
 
@@ -347,12 +353,19 @@ def main():
     if shard[1] > 1:
         print("shard done; run without --shard to write the report")
         return
-    if len(null) < 3 or not pilot:
-        print("not enough null/pilot trials logged to fit thresholds")
+    if len(null) < 3:
+        print("not enough null trials logged to set the noise floor")
         return
     floor = noise_floor(null)
-    frozen = fit_thresholds(pilot, replace(base, no_gap_per_feature=round(floor, 3)))
-    print("frozen thresholds:", frozen)
+    if pilot:
+        frozen = fit_thresholds(pilot, replace(base, no_gap_per_feature=round(floor, 3)))
+        source = f"fitted on {len(pilot)} own-family pilot trials"
+    else:
+        # no pilot run: the thresholds frozen in the package (fitted on earlier own-family
+        # pilots), with the noise floor of this run's null trials
+        frozen = replace(DiagnosisSettings(), no_gap_per_feature=round(floor, 3))
+        source = "frozen in sknarx.gap.settings (no pilot in this run), noise floor refitted"
+    print("frozen thresholds:", frozen, f"({source})")
     per_family = {}
     rows = []
     for fam, recs in evals.items():
@@ -377,7 +390,8 @@ def main():
     table(rows, ["family", "top-1", "pairs top-2", "false alarm", "out-of-lib unexpl.",
                  "shrink/oracle", "trials", "median s"])
     write_json("bench_gap_blind", {
-        "thresholds": asdict(frozen), "pilot": score(pilot, frozen),
+        "thresholds": asdict(frozen), "thresholds_source": source,
+        "pilot": score(pilot, frozen) if pilot else None,
         "families": per_family,
         "targets": {"top1": 0.9, "pairs_in_top2": 0.8, "false_alarm": 0.05,
                     "unexplained_out_of_library": 0.8, "shrink_vs_oracle_median": 0.9,
