@@ -6,7 +6,7 @@ Run: python examples/04_gap_diagnosis.py
 import numpy as np
 
 from sknarx.gap import diagnose
-from sknarx.gap.synthetic import make_trial
+from sknarx.testing import make_trial
 
 # A 'rig' with slow-roll runout, a few percent of stiffness/damping/unbalance mismatch,
 # noise and keyphasor jitter: the diagnoser only sees the table.

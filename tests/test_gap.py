@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from sknarx.gap import compare, diagnose, order_features
 from sknarx.gap.measured import check_measured
-from sknarx.gap.synthetic import make_trial
+from sknarx.testing import make_trial
 
 SPEEDS = tuple(np.linspace(81.7, 276.5, 6).round(4))
 
@@ -239,7 +239,7 @@ def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_
     # crack seed 21: the nuisance-only fit pulls the stiffness scale to 0.86 (the crack's
     # loss of mean stiffness, the rig's is 1.01); a crack started there converged to a
     # held-out gap of ~6,600 against the truth's ~70 (shrink 0.58 -> unexplained)
-    from sknarx.gap.synthetic import oracle_gap
+    from sknarx.testing import oracle_gap
 
     measured, truth = make_trial("crack", 21)
     d = diagnose(measured, candidates=("crack",))

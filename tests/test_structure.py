@@ -91,3 +91,11 @@ def test_no_import_cycle_between_rooms():
 
     for node in graph:
         visit(node)
+
+
+def test_no_pipeline_module_imports_the_test_equipment():
+    # sknarx.testing draws trials from the package's own simulator: a diagnosis that
+    # reached for it would be validating itself on its own model
+    users = sorted(m for m, deps in MODULES.items()
+                   if "sknarx.testing" in deps and m != "sknarx.testing")
+    assert not users, users

@@ -127,7 +127,7 @@ def _own_sweep(truth, physical, settle):
             effects.append(EFFECTS[name](amplitude=p["amplitude"],
                                          frequency=p["frequency_hz"]))
         elif name == "thermal-bow":
-            from sknarx.gap.synthetic import ThermalBow
+            from sknarx.testing import ThermalBow
 
             effects.append(ThermalBow(bow=p["bow"], angle=p["angle"]))
     sim = RotorBearingSimulator(params, effects=effects)

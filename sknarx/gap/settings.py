@@ -21,12 +21,9 @@ SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settl
 class DiagnosisSettings:
     """Frozen thresholds and search effort (fixed on pilot seeds, see the benchmark)."""
 
-    # the noise floor: 99 % quantile of the held-out excess per feature of 20 effect-free
-    # own-family trials of benchmarks/bench_gap_blind.py (seeds 2000-2019, settled, six
-    # channels, with the nominal update; log-normal fit; median 0.34, largest 0.51)
+    # the verdict thresholds are fitted by benchmarks/bench_gap_blind.py and frozen here;
+    # where each value came from (trials, seeds, quantiles) is in docs/gap.md
     no_gap_per_feature: float = 0.628  # mean held-out excess per feature below which: no-gap
-    # the others fitted on 32 own-family pilot trials of an earlier version of that
-    # benchmark (before the nominal update), then frozen
     min_shrink: float = 0.6  # a verdict must remove at least this share of the gap
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
     pair_trigger: float = 0.5  # try pairs when the best single leaves this excess per feature

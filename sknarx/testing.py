@@ -1,4 +1,9 @@
-"""Synthetic 'measurements' with withheld effects, for blind validation of the diagnosis.
+"""Test equipment: synthetic measurements from sknarx's own simulator with an effect
+withheld, for tests, examples and trying the gap diagnosis.
+
+Not part of the modelling or diagnosis pipeline, and not a validation: a trial is
+simulated by the same code the diagnosis fits with (the "inverse crime"); the blind
+validation on plants independent of ``sknarx.rotor`` is ``benchmarks/bench_gap_blind.py``.
 
 A trial draws an effect (or none, a pair, or an effect outside the library), its
 severity and parameters, rig-like nuisance mismatch (a few percent of stiffness,
@@ -15,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..rotor import (
+from .rotor import (
     EFFECTS,
     Effect,
     MeasurementNoise,
@@ -112,7 +117,7 @@ def make_trial(kind, seed: int, speeds=TRIAL_SPEEDS, fs=1000.0, n_samples=1000,
     truth : dict
         The withheld answer: effects, their parameters, nuisance values, noise.
     """
-    from ..rotor import SimulationDivergenceError
+    from .rotor import SimulationDivergenceError
 
     base = base or RotorParameters()
     names = () if kind is None else ((kind,) if isinstance(kind, str) else tuple(kind))
@@ -156,9 +161,9 @@ def _trial(names, rng, seed, speeds, fs, n_samples, base):
 
 def oracle_gap(measured, truth, heldout, channels=CHANNELS, transient_s=0.5, base=None):
     """Held-out excess gap of the true model (true effects, true nuisance values)."""
-    from .calibration import Calibration, SweepModel, heldout_gap
-    from .features import order_features
-    from .measured import check_measured
+    from .gap.calibration import Calibration, SweepModel, heldout_gap
+    from .gap.features import order_features
+    from .gap.measured import check_measured
 
     measured, info = check_measured(measured, list(channels))
     model = SweepModel(base=base or RotorParameters(), fs=info["fs"],
