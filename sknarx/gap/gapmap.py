@@ -63,6 +63,12 @@ def _align(meas: pd.DataFrame, sim: pd.DataFrame, max_offset_deg: float) -> pd.D
     return out, Sc, m, s
 
 
+#: the nominal model's own harmonics and lines (from the bearings' contact law, whose
+#: clearance, exponent and housing are uncertain) are trusted to within this share of
+#: their size: an effect must add more than the model's own harmonic to be seen
+HARMONIC_TOL = 1.0
+
+
 def model_form_var(meas: pd.DataFrame, Sc) -> np.ndarray:
     """Variance (m^2) a measured feature's ``model_tol`` column (relative model-form
     tolerance, set by the nominal update; 0 or absent: none) allows around ``Sc``."""
@@ -87,6 +93,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     var = se_m**2 + se_s**2 + (rtol * np.abs(Sc)) ** 2 + model_form_var(m, Sc)
     var = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2
                    + (rtol * np.abs(Sc)) ** 2, var)
+    var = var + np.where(feats == "1x", 0.0, (HARMONIC_TOL * np.abs(Sc)) ** 2)
     var = np.maximum(var, 1e-300)
     z2 = diff**2 / var
     expect = np.where(nons, 1.0, 2.0)
@@ -113,6 +120,7 @@ def fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, rtol=0.01,
                    se_m**2 + se_s**2) + (rtol * np.abs(Sc)) ** 2
     if model_tol is not None:
         var = var + np.where(nons, 0.0, (model_tol * np.abs(Sc)) ** 2)
+    var = var + np.where(order_k == 1.0, 0.0, (HARMONIC_TOL * np.abs(Sc)) ** 2)
     d = (M - Sc) / np.sqrt(np.maximum(var, 1e-300))
     return np.concatenate([d.real, d.imag])
 
