@@ -322,7 +322,7 @@ def test_an_effect_free_sweep_of_a_mismatched_rotor_is_no_gap_with_the_updates_l
     off = diagnose(measured, candidates=(), settings=replace(DiagnosisSettings(),
                                                              update_nominal=False))
     assert off["nominal_update"] is None
-    # without the update the gap stays well above the floor (1.70 per feature, 0.628)
+    # without the update the gap stays well above the floor
     assert off["gap_before"]["per_feature"] > 2 * off["settings"]["no_gap_per_feature"]
     assert off["verdict"] == "unexplained"
 
