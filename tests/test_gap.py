@@ -236,19 +236,24 @@ def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
 
 @pytest.mark.slow
 def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_absorbed():
-    # crack seed 21: the nuisance-only fit pulls the stiffness scale to 0.86 (the crack's
-    # loss of mean stiffness, the rig's is 1.01); a crack started there converged to a
-    # held-out gap of ~6,600 against the truth's ~70 (shrink 0.58 -> unexplained)
+    # crack seed 21: the nuisance-only fit absorbs part of the crack in the stiffness
+    # scale (0.86 when harmonics had no model-form tolerance, 1.15 with it; the rig's is
+    # 1.01); a crack started there converged to a held-out gap of ~6,600 against the
+    # truth's ~70 (shrink 0.58 -> unexplained)
     from sknarx.testing import oracle_gap
 
     measured, truth = make_trial("crack", 21)
     d = diagnose(measured, candidates=("crack",))
-    assert d["nuisance"]["calibrated"]["stiffness_scale"] < 0.9  # the trap is there
+    absorbed = d["nuisance"]["calibrated"]["stiffness_scale"]
+    assert abs(absorbed / truth["nuisance"]["stiffness_scale"] - 1) > 0.1  # the trap is there
     assert d["verdict"] == "crack"
     E0 = d["gap_before"]["heldout_excess"]
     oracle = 1 - oracle_gap(measured, truth, d["split"]["heldout_speeds"]) / E0
     assert d["shrink"] >= 0.95 * oracle
-    fitted = d["ranking"][0]["nuisance"]["stiffness_scale"]
+    # the candidate's segment stiffness (its scale on top of the updated nominal k1) is
+    # the rig's, not the trap's
+    upd = {p["parameter"]: p["change"] for p in d["nominal_update"]["parameters"]}
+    fitted = d["ranking"][0]["nuisance"]["stiffness_scale"] * (1 + upd["k1"])
     assert abs(fitted / truth["nuisance"]["stiffness_scale"] - 1) < 0.03
 
 
