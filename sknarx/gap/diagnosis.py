@@ -36,7 +36,7 @@ from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, heldout_gap
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
-from .gapmap import regions
+from .gapmap import HARMONIC_TOL, regions
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
 
@@ -125,17 +125,23 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
                           "settle": settle_s + transient_s})
 
 
-def _with_model_tolerance(meas, update, rtol=0.01):
-    """The measured features with each channel's 1x model-form tolerance from the
-    update: what the updated model cannot follow on a channel's 1x over the training
-    speeds (beyond the comparison's own ``rtol``; a constant per-probe vector excluded)
-    is model error, not evidence for an effect. Harmonics, sub-harmonics and
-    non-synchronous lines keep no such allowance: they are what effects must explain."""
-    tol = update.mismatch.get("model_tolerance", {})
+def _with_model_tolerance(meas, model, speeds, update, rtol=0.01):
+    """The measured features with their model-form tolerance (m), fixed once from the
+    updated nominal model's own features ``S``: for the 1x, what the update could not
+    remove of each channel's misfit over the training speeds (``tau_c |S|`` beyond the
+    comparison's ``rtol``; a constant per-probe vector excluded); for every harmonic and
+    line, ``HARMONIC_TOL |S|``: the model's own harmonics come from a contact law no rig
+    matches. What exceeds that is what effects must explain."""
+    nominal = model.features(speeds, np.array([v[3] for v in NUISANCE.values()]))
+    key = ["speed", "window", "channel", "feature"]
+    S = nominal.set_index(key).reindex(pd.MultiIndex.from_frame(meas[key]))
+    size = np.hypot(S["re"].to_numpy(dtype=float), S["im"].to_numpy(dtype=float))
+    tol = update.mismatch.get("model_tolerance", {}) if update is not None else {}
     extra = {c: float(np.sqrt(max(t * t - rtol * rtol, 0.0))) for c, t in tol.items()}
+    share = np.where(meas["feature"] == "1x", meas["channel"].map(extra).fillna(0.0),
+                     HARMONIC_TOL)
     out = meas.copy()
-    out["model_tol"] = np.where(out["feature"] == "1x", out["channel"].map(extra).fillna(0.0),
-                                0.0)
+    out["model_tol"] = np.nan_to_num(share * size)
     return out
 
 
@@ -207,10 +213,10 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         update = _update_nominal(meas, train, channels, base, info, transient_s, settle_s,
                                  settings)
         base = update.params
-        meas = _with_model_tolerance(meas, update)
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
                        channels=tuple(channels), transient_s=transient_s, settle_s=settle_s)
+    meas = _with_model_tolerance(meas, model, speeds, update)
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 

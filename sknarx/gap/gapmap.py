@@ -69,20 +69,23 @@ def _align(meas: pd.DataFrame, sim: pd.DataFrame, max_offset_deg: float) -> pd.D
 HARMONIC_TOL = 1.0
 
 
-def model_form_var(meas: pd.DataFrame, Sc) -> np.ndarray:
-    """Variance (m^2) a measured feature's ``model_tol`` column (relative model-form
-    tolerance, set by the nominal update; 0 or absent: none) allows around ``Sc``."""
+def model_form_var(meas: pd.DataFrame) -> np.ndarray:
+    """Variance (m^2) of a measured feature's ``model_tol`` column: the model-form
+    tolerance, in metres, fixed once from the updated nominal model (0 or absent: none).
+
+    Absolute, not a share of the simulation being compared: a tolerance that grew with
+    the candidate's own harmonics would reward a candidate for inflating them."""
     if "model_tol" not in meas.columns:
         return np.zeros(len(meas))
-    return (meas["model_tol"].to_numpy(dtype=float) * np.abs(Sc)) ** 2
+    return meas["model_tol"].fillna(0.0).to_numpy(dtype=float) ** 2
 
 
 def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
             max_offset_deg: float = 5.0) -> pd.DataFrame:
     """Feature-by-feature gap between measured and simulated order features.
 
-    A ``model_tol`` column in ``meas`` widens each feature's tolerance by that share of
-    the simulated amplitude (the model-form error the nominal update could not remove).
+    A ``model_tol`` column in ``meas`` (m) widens each feature's tolerance by the
+    model-form error the nominal model is allowed (see ``diagnosis``).
     """
     Mc, Sc, m, s = _align(meas, sim, max_offset_deg)
     feats = m.index.get_level_values("feature").to_numpy()
@@ -90,10 +93,9 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     se_s = s["se"].to_numpy()
     nons = np.array([is_nonsync(f) for f in feats], dtype=bool)
     diff = np.abs(Mc - Sc)
-    var = se_m**2 + se_s**2 + (rtol * np.abs(Sc)) ** 2 + model_form_var(m, Sc)
+    var = se_m**2 + se_s**2 + (rtol * np.abs(Sc)) ** 2
     var = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2
-                   + (rtol * np.abs(Sc)) ** 2, var)
-    var = var + np.where(feats == "1x", 0.0, (HARMONIC_TOL * np.abs(Sc)) ** 2)
+                   + (rtol * np.abs(Sc)) ** 2, var) + model_form_var(m)
     var = np.maximum(var, 1e-300)
     z2 = diff**2 / var
     expect = np.where(nons, 1.0, 2.0)
@@ -109,7 +111,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
 def fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, rtol=0.01,
                   max_offset_deg=5.0, model_tol=None):
     """Normalised residuals of aligned feature arrays (the calibration's inner loop);
-    ``model_tol`` as in :func:`compare`, per feature."""
+    ``model_tol`` (m) as in :func:`compare`, per feature."""
     lim = np.radians(max_offset_deg)
     is1 = order_k == 1.0
     num = np.bincount(speed_idx[is1], weights=(Mc[is1] * np.conj(Sc[is1])).real)
@@ -119,8 +121,7 @@ def fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, rtol=0.01,
     var = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2,
                    se_m**2 + se_s**2) + (rtol * np.abs(Sc)) ** 2
     if model_tol is not None:
-        var = var + np.where(nons, 0.0, (model_tol * np.abs(Sc)) ** 2)
-    var = var + np.where(order_k == 1.0, 0.0, (HARMONIC_TOL * np.abs(Sc)) ** 2)
+        var = var + model_tol**2
     d = (M - Sc) / np.sqrt(np.maximum(var, 1e-300))
     return np.concatenate([d.real, d.imag])
 
