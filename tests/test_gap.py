@@ -237,7 +237,7 @@ def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
 @pytest.mark.slow
 def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_absorbed():
     # crack seed 21: the nuisance-only fit absorbs part of the crack in the stiffness
-    # scale (0.86 when harmonics had no model-form tolerance, 1.15 with it; the rig's is
+    # scale (0.86 when harmonics had no model-form tolerance, 0.92 with it; the rig's is
     # 1.01); a crack started there converged to a held-out gap of ~6,600 against the
     # truth's ~70 (shrink 0.58 -> unexplained)
     from sknarx.testing import oracle_gap
@@ -245,7 +245,7 @@ def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_
     measured, truth = make_trial("crack", 21)
     d = diagnose(measured, candidates=("crack",))
     absorbed = d["nuisance"]["calibrated"]["stiffness_scale"]
-    assert abs(absorbed / truth["nuisance"]["stiffness_scale"] - 1) > 0.1  # the trap is there
+    assert abs(absorbed / truth["nuisance"]["stiffness_scale"] - 1) > 0.05  # the trap is there
     assert d["verdict"] == "crack"
     E0 = d["gap_before"]["heldout_excess"]
     oracle = 1 - oracle_gap(measured, truth, d["split"]["heldout_speeds"]) / E0
