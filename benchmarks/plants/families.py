@@ -19,7 +19,6 @@ written here, once, for all families. What a family cannot express is listed in
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 CHANNELS = ("xO1", "yO1", "xA", "yA", "xB", "yB")
 SPEEDS = tuple(np.linspace(81.7, 276.5, 10).round(4))
@@ -236,7 +235,3 @@ def feature_gap(measured, predicted, speeds):
     p = order_features(predicted, list(CHANNELS), 0.0)
     cmp = compare(m[m.speed.isin(speeds)], p[p.speed.isin(speeds)])
     return gap_statistic(cmp), len(cmp)
-
-
-def as_frame(table):
-    return table if isinstance(table, pd.DataFrame) else pd.DataFrame(table)

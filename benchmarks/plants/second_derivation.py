@@ -154,7 +154,6 @@ class SecondRotor:
             C[h, h] += 2 * p.zeta_housing * np.sqrt(p.k_px * p.m_housing)
             C[h + 1, h + 1] += 2 * p.zeta_housing * np.sqrt(p.k_py * p.m_housing)
         F0 = np.zeros(NDOF)
-        F0[1:NDOF:2] = 0.0
         for i in (XA, XO1, XO2, XB, XHA, XHB):
             F0[i + 1] = -M[i, i] * p.gravity
         return M, C, K, G, F0

@@ -125,14 +125,14 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
                           "settle": settle_s + transient_s})
 
 
-def _with_model_tolerance(meas, model, speeds, update, rtol=0.01):
+def _with_model_tolerance(meas, nominal, update, rtol=0.01):
     """The measured features with their model-form tolerance (m), fixed once from the
     updated nominal model's own features ``S``: for the 1x, what the update could not
     remove of each channel's misfit over the training speeds (``tau_c |S|`` beyond the
     comparison's ``rtol``; a constant per-probe vector excluded); for every harmonic and
     line, ``HARMONIC_TOL |S|``: the model's own harmonics come from a contact law no rig
-    matches. What exceeds that is what effects must explain."""
-    nominal = model.features(speeds, np.array([v[3] for v in NUISANCE.values()]))
+    matches. What exceeds that is what effects must explain. ``nominal``: the updated
+    nominal model's features at every speed."""
     key = ["speed", "window", "channel", "feature"]
     S = nominal.set_index(key).reindex(pd.MultiIndex.from_frame(meas[key]))
     size = np.hypot(S["re"].to_numpy(dtype=float), S["im"].to_numpy(dtype=float))
@@ -216,12 +216,15 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
                        channels=tuple(channels), transient_s=transient_s, settle_s=settle_s)
-    meas = _with_model_tolerance(meas, model, speeds, update)
+    # the updated nominal model's features, simulated once: the model-form tolerance
+    # reads them at every speed, the nuisance start at the training speeds
+    nominal_all = model.features(speeds, np.array([v[3] for v in NUISANCE.values()]))
+    meas = _with_model_tolerance(meas, nominal_all, update)
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 
     # the nuisance-only model: start its unbalance phase from the 1x phase difference
-    nominal = model.features(train, np.array([v[3] for v in NUISANCE.values()]))
+    nominal = nominal_all[nominal_all.speed.isin(train)]
     m1 = meas[(meas.feature == "1x") & meas.speed.isin(train)]
     s1 = nominal.set_index(["speed", "window", "channel", "feature"]).reindex(
         pd.MultiIndex.from_frame(m1[["speed", "window", "channel", "feature"]]))
