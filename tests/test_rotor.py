@@ -1,6 +1,8 @@
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import sknarx.rotor as R
 from sknarx.orders import order_components
@@ -228,6 +230,30 @@ def test_simulate_columns_records_what_a_probe_would_at_the_nominal_speed():
     again = sim.simulate_columns(120.0, **kw)  # seeded noise: repeatable, not aliased
     again["xO1"] = again["xO1"] + 1.0
     np.testing.assert_array_equal(sim.simulate_columns(120.0, **kw)["xO1"], cols["xO1"])
+
+
+@settings(max_examples=8, deadline=None)
+@given(lead=st.floats(0.0, 0.4), omega=st.floats(60.0, 300.0))
+def test_a_run_continued_from_its_warm_state_repeats_the_long_run(lead, omega):
+    # the calibration's local searches continue settled runs (warm_state): with the
+    # same parameters, effects and speed modulation the continued record is the long
+    # run's record, whatever the lead
+    effects = [R.BreathingCrack(depth=0.2, angle=0.4),
+               R.SpeedFluctuation(amplitude=0.01, frequency=3.0)]
+    sim = R.RotorBearingSimulator(effects=effects, seed=2)
+    long = sim.simulate_columns(omega, n_samples=300, settle=0.4)
+    state = sim.warm_state(omega, settle=0.4, lead=lead)
+    short = sim.simulate_columns(omega, n_samples=300, settle=lead, state=state)
+    for name in ("xO1", "yB", "phi"):
+        scale = np.max(np.abs(long[name]))
+        np.testing.assert_allclose(short[name], long[name], rtol=0, atol=1e-9 * scale)
+
+
+def test_warm_state_input_is_checked(sim):
+    with pytest.raises(ValueError, match="lead must lie in"):
+        sim.warm_state(100.0, settle=0.2, lead=0.5)
+    with pytest.raises(ValueError, match="settle"):
+        sim.warm_state(100.0, settle=-1.0)
 
 
 def _small_beam(kx=1e5, ky=1e5):

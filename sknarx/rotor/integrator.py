@@ -73,6 +73,7 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
     U : (n + 1 - record_from,) the paper's input, disk O1's x unbalance force, N.
     PHI : (n + 1 - record_from,) shaft angle, rad.
     status : -1, or the sample index at which the solution diverged.
+    q, v : (ndof,) the state at the last sample (to continue a run from).
     """
     n = omega.shape[0] - 1
     ndof = q0.shape[0]
@@ -111,7 +112,7 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
             if not (abs(q[i]) <= limit):
                 bad = True
         if bad:
-            return Q, U, PHI, k
+            return Q, U, PHI, k, q, v
         if k == n:
             break
         tk = t0 + k * dt
@@ -149,4 +150,4 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
                 q[i] += h / 6.0 * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
                 v[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i])
         phi += 0.5 * (wk + omega[k + 1]) * dt
-    return Q, U, PHI, -1
+    return Q, U, PHI, -1, q, v
