@@ -60,6 +60,10 @@ class SweepModel:
     transient_s: float = 0.5
     seed: int = 0
     settle_s: float = 0.0  # simulated and discarded before each record (0: from rest)
+    # speed (rad/s) -> (q, v): each speed's run continues a settled run from ``lead_s``
+    # before its record instead of settling from rest (see ``warmed``; None: never)
+    warm: dict | None = None
+    lead_s: float | None = 0.3
 
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis
@@ -69,6 +73,29 @@ class SweepModel:
             c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc,
             c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
         )
+
+    def warmed(self, speeds, nuis, effects=()) -> SweepModel:
+        """This model with every speed's run continuing the settled run of the rotor
+        ``(nuis, effects)``: ``lead_s`` seconds of settling instead of ``settle_s``.
+
+        A local search moves the parameters a little: its runs start near their own
+        steady state and the short lead lets the small difference decay (the slow
+        modes are the least excited ones). Every run of one warmed model starts from
+        the same states, so its residual is a smooth function of the parameters.
+        Records that start with a transient (``settle_s`` 0) are not warmed: their
+        start from rest is part of what is compared.
+        """
+        if self.lead_s is None or self.settle_s <= self.lead_s:
+            return self
+        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
+        _ = sim._setup
+        _ = sim._lambda_max_per_speed
+
+        def one(w):
+            return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
+                                            lead=self.lead_s)
+
+        return dataclasses.replace(self, warm=dict(_pool().map(one, speeds)))
 
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
@@ -82,11 +109,14 @@ class SweepModel:
         sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
         _ = sim._setup  # build once, before the threads share it
         _ = sim._lambda_max_per_speed
+        warm = self.warm or {}
 
         def one(w):
             # automatic step: halved if an effect's stiff contact makes it unstable
+            state = warm.get(float(w))
             run = sim.simulate_columns(float(w), fs=self.fs, n_samples=self.n_samples,
-                                       settle=self.settle_s)
+                                       settle=self.settle_s if state is None else self.lead_s,
+                                       state=state)
             Y = np.column_stack([run[c] for c in self.channels])
             return then((float(w), run["t"], Y))
 
@@ -139,6 +169,16 @@ def _split_x(classes):
             log.append(is_log)
             names.append((cls.name, n))
     return np.array(lo), np.array(hi), np.array(log), names
+
+
+def _class_of(classes, j):
+    """The effect class whose parameter sits at index ``j`` of the search vector."""
+    i = len(NUISANCE)
+    for cls in classes:
+        i += len(cls.bounds)
+        if j < i:
+            return cls
+    raise IndexError(j)
 
 
 def _decode(x, classes, log, combo=None):
@@ -214,7 +254,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     Discrete settings of an effect (``discrete``, e.g. a crack's station) are probed
     in every combination with the same Sobol points, and the local runs keep the
     combination of the probe they start from; ``fixed`` (one dict or None per class)
-    holds some of them (a pair keeps its leading effect's station).
+    holds some of them (a pair keeps its leading effect's station). Each local run and
+    each discrete setting's probes continue the settled runs of their start when the
+    model allows it (see :meth:`SweepModel.warmed`) instead of settling every
+    evaluation from rest.
     """
     from scipy.stats import qmc
 
@@ -229,17 +272,28 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)
 
-    def residual(x, combo=combos[0]):
+    def residual(x, combo=combos[0], sweep=model):
         nuis, effects = _decode(x, classes, log, combo)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
+                _, Sc, se_s, _ = sweep.feature_arrays(speeds, nuis, effects)
             Sc, _ = project(Sc, se_s)
             r = fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, model_tol=tol)
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             return np.full(size, 1e3)
         return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
+
+    def warmed(x, combo):
+        # every run of one local search continues the settled runs of its start: a
+        # fraction of the settling per evaluation, and one smooth residual
+        nuis, effects = _decode(x, classes, log, combo)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return model.warmed(speeds, nuis, effects)
+        except (SimulationDivergenceError, ValueError, FloatingPointError):
+            return model
 
     def finish(x, std, cost, success, combo):
         """The calibration at ``x``, with the projected effects' closed-form values."""
@@ -259,7 +313,11 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     def start_vector(start):
         x0 = np.array([v[3] for v in NUISANCE.values()] + [0.0] * (len(lo) - len(NUISANCE)))
         for j in range(len(NUISANCE), len(lo)):
-            x0[j] = lo[j] + 0.25 * (hi[j] - lo[j])
+            # an effect's stated start (e.g. a crack's element stiffness: the model's),
+            # else a quarter into its range
+            given = getattr(_class_of(classes, j), "start", {}).get(names[j][1])
+            x0[j] = ((np.log10(given) if log[j] else given) if given is not None
+                     else lo[j] + 0.25 * (hi[j] - lo[j]))
         if start is not None:
             x0[: len(start)] = start[: len(x0)]
         return np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
@@ -272,11 +330,12 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         unit = qmc.Sobol(len(lo) - j0, scramble=True, seed=seed).random(n_probe)
         probes = []
         for combo in combos:
+            sweep = warmed(base, combo)
             for u in unit:
                 x = base.copy()
                 x[j] = lo[j] + u * (hi[j] - lo[j])
-                probes.append((float(np.sum(residual(x, combo) ** 2)), x, combo))
-            probes.append((float(np.sum(residual(base, combo) ** 2)), base, combo))
+                probes.append((float(np.sum(residual(x, combo, sweep) ** 2)), x, combo))
+            probes.append((float(np.sum(residual(base, combo, sweep) ** 2)), base, combo))
         probes.sort(key=lambda p: p[0])
         # each discrete setting gets its own leading starts: a wrong station's probes
         # can all undercut the right one's before any local run (crack trial 5068: the
@@ -295,7 +354,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
 
     def local(x0, nfev, combo):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
-                             diff_step=diff_step, max_nfev=nfev, args=(combo,))
+                             diff_step=diff_step, max_nfev=nfev,
+                             args=(combo, warmed(x0, combo)))
 
     if len(x0s) > 1:
         # the cheapest probe is often in the wrong basin of a periodic parameter: a short

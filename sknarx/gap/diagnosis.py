@@ -215,7 +215,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         base = update.params
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
-                       channels=tuple(channels), transient_s=transient_s, settle_s=settle_s)
+                       channels=tuple(channels), transient_s=transient_s, settle_s=settle_s,
+                       lead_s=settings.warm_lead_s)
     # the updated nominal model's features, simulated once: the model-form tolerance
     # reads them at every speed, the nuisance start at the training speeds
     nominal_all = model.features(speeds, np.array([v[3] for v in NUISANCE.values()]))

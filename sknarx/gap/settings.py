@@ -14,7 +14,7 @@ __all__ = ["DiagnosisSettings", "SEARCH_FIELDS"]
 
 #: the fields that change what a diagnosis computes (the others only read its results)
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
-                 "update_nominal", "update_max_nfev", "seed")
+                 "update_nominal", "update_max_nfev", "seed", "warm_lead_s")
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,10 @@ class DiagnosisSettings:
     # simulations settled this long first: five time constants of the paper rotor's
     # slowest lightly damped mode (see RotorBearingSimulator.simulate)
     settle_s: float = 2.0
+    # a calibration's local search continues the settled runs of its start from this
+    # long before each record (s) instead of settling every evaluation from rest for
+    # settle_s (see SweepModel.warmed); None: always from rest
+    warm_lead_s: float | None = 0.3
     # update the nominal rotor's linear parameters on the training speeds' steady 1x
     # before any effect is blamed (sknarx.gap.updating): what the update explains is
     # model error and is reported as such

@@ -254,8 +254,9 @@ class Misalignment(Effect):
 @njit(nogil=True, cache=True)
 def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     # p: lost stiffness, crack angle, then the cracked element's deformation in each
-    # plane as four (DOF index, coefficient) pairs: x plane from p[2], y plane from p[10]
-    dk, psi = p[0], p[1]
+    # plane as four (DOF index, coefficient) pairs: x plane from p[2], y plane from p[10],
+    # then the element's stiffness change in every direction (p[18])
+    dk, psi, ds = p[0], p[1], p[18]
     dx = 0.0
     dy = 0.0
     for k in range(4):
@@ -266,7 +267,8 @@ def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     # gravity-driven breathing (Mayes & Davies): fully open when the crack faces down
     h = 0.5 * (1.0 - math.cos(phi + psi + 0.5 * math.pi))
     f = dk * h * xi  # the cracked direction loses stiffness dk: add back dk*h*xi
-    fx, fy = f * nx, f * ny
+    # ... and the element is ds stiffer in every direction (restoring -ds * deformation)
+    fx, fy = f * nx - ds * dx, f * ny - ds * dy
     for k in range(4):
         out[int(p[2 + 2 * k])] += fx * p[3 + 2 * k]
         out[int(p[10 + 2 * k])] += fy * p[11 + 2 * k]
@@ -317,17 +319,28 @@ class BreathingCrack(Effect):
     1984; Gasch, J. Sound Vib. 1993). The station is searched as a discrete
     parameter (``discrete``). Signature: 2x (and 3x) rising near half the critical
     speed; a small 1x change.
+
+    ``element_scale`` is the cracked element's stiffness (closed) relative to the
+    model's: a crack's mean loss of stiffness (``depth / 2``) is linear and looks to
+    the 1x like a softer element, which nominal model updating may already have taken
+    (a stiffness it is allowed to correct). With the element's stiffness fitted with
+    it, a crack is credited only with what updating cannot explain -- its breathing.
     """
 
     depth: float = 0.1
     angle: float = 0.0
     station: str = "A-O1"
+    element_scale: float = 1.0
     name = "crack"
     STATIONS = ("A-O1", "joint", "O2-B")
-    bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin")}
+    bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin"),
+              "element_scale": (0.7, 1.4, "log")}
+    #: where a calibration starts the parameters (the others: a quarter into the range)
+    start = {"element_scale": 1.0}
     #: settings searched over a list rather than a range (the calibration probes each)
     discrete = {"station": STATIONS}
-    units = {"depth": "- (stiffness lost, open)", "angle": "rad", "station": ""}
+    units = {"depth": "- (stiffness lost, open)", "angle": "rad", "station": "",
+             "element_scale": "- (element stiffness / model's)"}
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
     def __post_init__(self):
@@ -335,7 +348,8 @@ class BreathingCrack(Effect):
 
     def force_kernel(self, context):
         k, pairs = _crack_element(self.station, context.params, context.dof_index)
-        return _crack_kernel, np.array([self.depth * k, self.angle, *pairs])
+        return _crack_kernel, np.array([self.depth * k, self.angle, *pairs,
+                                        (self.element_scale - 1.0) * k])
 
 
 @njit(nogil=True, cache=True)
