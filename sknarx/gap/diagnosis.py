@@ -283,7 +283,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     def run(names):
         classes = [EFFECTS[n] for n in names]
         cal = calibrate(model, meas, train, classes, starts=[nuis_start],
-                        max_nfev=settings.max_nfev)
+                        max_nfev=settings.max_nfev, n_probe=settings.n_probe)
         return _held(classes, names, cal)
 
     logger.info("held-out gap %.3g per feature (no-gap floor %.3g): fitting %d effect "
@@ -328,14 +328,14 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
             # candidate by probing it on top of the leading fit instead
             cal = calibrate(model, meas, train, [EFFECTS[lead], EFFECTS[partner]],
                             starts=[lead_x], max_nfev=0, probe_from=len(lead_x),
-                            fixed=[lead_fixed, None])
+                            fixed=[lead_fixed, None], n_probe=settings.n_probe)
             return cal.cost, partner
 
         def run_pair(partner):
             classes = [EFFECTS[lead], EFFECTS[partner]]
             cal = calibrate(model, meas, train, classes, starts=[lead_x],
                             max_nfev=settings.max_nfev, probe_from=len(lead_x),
-                            fixed=[lead_fixed, None])
+                            fixed=[lead_fixed, None], n_probe=settings.n_probe)
             return _held(classes, (lead, partner), cal)
 
         def refit_member(names, pair_cal, member):

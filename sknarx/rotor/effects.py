@@ -174,22 +174,33 @@ class Rub(Effect):
     """Rotor-stator rub at a disk: radial contact beyond a clearance, with friction.
 
     ``F_n = k_c (r - c)`` for ``r > c`` (``r``: the disk's radial displacement from
-    the stator centre, placed at the static equilibrium), Coulomb friction
-    ``mu F_n`` against the spin (Muszynska, *Rotordynamics*, 2005, ch. 7).
+    the stator centre), Coulomb friction ``mu F_n`` against the spin (Muszynska,
+    *Rotordynamics*, 2005, ch. 7). The stator centre sits ``(offset_x, offset_y)``
+    (m) from the disk's static equilibrium: a seal or casing is aligned with the
+    bearings, not with the rotor's gravity sag (about 0.56 mm at the paper rotor's
+    disks), and rarely even with those, so a rotor rubs first on one side long before
+    its orbit reaches the clearance.
 
-    Parameters: ``clearance`` (m), ``stiffness`` (N/m), ``friction`` (-), ``at``
-    (``'O1'`` or ``'O2'``, searched as a discrete parameter).
+    Parameters: ``clearance`` (m), ``stiffness`` (N/m), ``friction`` (-),
+    ``offset_x``, ``offset_y`` (m), ``at`` (``'O1'`` or ``'O2'``, searched as a
+    discrete parameter).
     """
 
     clearance: float = 5e-4
     stiffness: float = 5e6
     friction: float = 0.1
+    offset_x: float = 0.0
+    offset_y: float = 0.0
     at: str = "O1"
     name = "rub"
     bounds = {"clearance": (1e-4, 2e-3, "log"), "stiffness": (1e5, 1e8, "log"),
-              "friction": (0.0, 0.3, "lin")}
+              "friction": (0.0, 0.3, "lin"), "offset_x": (-1e-3, 1e-3, "lin"),
+              "offset_y": (-1e-3, 1e-3, "lin")}
+    #: where a calibration starts the parameters (the others: a quarter into the range)
+    start = {"offset_x": 0.0, "offset_y": 0.0}
     discrete = {"at": ("O1", "O2")}
-    units = {"clearance": "m", "stiffness": "N/m", "friction": "-", "at": ""}
+    units = {"clearance": "m", "stiffness": "N/m", "friction": "-", "offset_x": "m",
+             "offset_y": "m", "at": ""}
     signature = ("amplitude clipped near the response peak; 2x, 3x and sub-synchronous "
                  "(1/2x, 1/3x) orders where the orbit exceeds the clearance")
 
@@ -198,7 +209,8 @@ class Rub(Effect):
 
     def force_kernel(self, context):
         ix, iy = context.dof_index["x" + self.at], context.dof_index["y" + self.at]
-        p = np.array([ix, iy, context.q_static[ix], context.q_static[iy], self.clearance,
+        p = np.array([ix, iy, context.q_static[ix] + self.offset_x,
+                      context.q_static[iy] + self.offset_y, self.clearance,
                       self.stiffness, self.friction], dtype=float)
         return _rub_kernel, p
 
