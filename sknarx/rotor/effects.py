@@ -219,12 +219,19 @@ class Rub(Effect):
 def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     ix, iy = int(p[0]), int(p[1])
     kc, par, ang, lc = p[2], p[3], p[4], p[5]
-    # parallel offset: a pulsating force at twice the shaft angle along the offset
-    # (horizontal); angular: a 1x bending moment, seen at the journal as a force
-    f2 = kc * par * 0.5 * (1.0 - math.cos(2.0 * phi))
+    direction, phase, whirl, phase1 = p[6], p[7], p[8], p[9]
+    # parallel offset: a force at twice the shaft angle, (kc par / 2) e^{i direction}
+    # (-1 + cos th + i whirl sin th), th = 2 phi + phase: planar along the offset with
+    # its static part (whirl 0), an ellipse, or a circle (whirl +-1)
+    th = 2.0 * phi + phase
+    a = 0.5 * kc * par
+    gx = -1.0 + math.cos(th)
+    gy = whirl * math.sin(th)
+    cd, sd = math.cos(direction), math.sin(direction)
+    # angular: a 1x bending moment, seen at the journal as a rotating force
     f1 = kc * lc * ang
-    out[ix] += -f2 - f1 * math.cos(phi)
-    out[iy] += -f1 * math.sin(phi)
+    out[ix] += a * (cd * gx - sd * gy) - f1 * math.cos(phi + phase1)
+    out[iy] += a * (sd * gx + cd * gy) - f1 * math.sin(phi + phase1)
 
 
 @dataclass(repr=False)
@@ -234,21 +241,35 @@ class Misalignment(Effect):
 
     Phenomenological model after Redmond & Al-Hussain (J. Sound Vib. 2010): a
     flexible coupling of lateral stiffness ``k_c = 1e6 N/m`` and length
-    ``L_c = 0.1 m`` transmits, for a parallel offset ``parallel`` (m, horizontal),
-    a force ``k_c parallel (1 - cos 2 phi)/2`` (static preload + 2x) and, for an
-    angular misalignment ``angular`` (rad), a rotating 1x force
-    ``k_c L_c angular``. Signature: 2x at the drive-end journal and the disks,
-    growing with offset but not with speed; a static shift (invisible to
-    AC-coupled probes); for angular misalignment a speed-independent 1x vector.
+    ``L_c = 0.1 m`` transmits, for a parallel offset ``parallel`` (m) in the
+    direction ``direction`` (rad from x), a force ``k_c parallel (1 - cos(2 phi +
+    phase))/2`` along the offset (static preload + 2x) and, for an angular
+    misalignment ``angular`` (rad), a rotating 1x force ``k_c L_c angular`` at
+    ``angular_phase`` from the keyphasor. Couplings and their models differ in how
+    the 2x reaction turns: ``whirl`` adds the quadrature component (0: planar along
+    the offset, as Redmond's; +-1: a circular forward or backward 2x force, as
+    Sekhar & Prabhu's coupling reaction), so the 2x force can take any ellipse and
+    phase. Signature: 2x at the drive-end journal and the disks, growing with offset
+    but not with speed; a static shift (invisible to AC-coupled probes); for angular
+    misalignment a speed-independent 1x vector.
     """
 
     parallel: float = 1e-4
     angular: float = 0.0
+    direction: float = 0.0
+    phase: float = 0.0
+    whirl: float = 0.0
+    angular_phase: float = 0.0
     at: str = "A"
     name = "misalignment"
-    bounds = {"parallel": (0.0, 1e-3, "lin"), "angular": (0.0, 5e-3, "lin")}
+    bounds = {"parallel": (0.0, 1e-3, "lin"), "angular": (0.0, 5e-3, "lin"),
+              "direction": (-math.pi, math.pi, "lin"), "phase": (-math.pi, math.pi, "lin"),
+              "whirl": (-1.0, 1.0, "lin"), "angular_phase": (-math.pi, math.pi, "lin")}
+    #: where a calibration starts the parameters (the others: a quarter into the range)
+    start = {"direction": 0.0, "phase": 0.0, "whirl": 0.0, "angular_phase": 0.0}
     discrete = {"at": ("A", "B")}
-    units = {"parallel": "m", "angular": "rad", "at": ""}
+    units = {"parallel": "m", "angular": "rad", "direction": "rad", "phase": "rad",
+             "whirl": "-", "angular_phase": "rad", "at": ""}
     signature = ("2x at every speed (not growing with speed^2), strongest at the coupled "
                  "bearing; 1x offset")
     K_C = 1e6
@@ -259,7 +280,8 @@ class Misalignment(Effect):
 
     def force_kernel(self, context):
         p = np.array([context.dof_index["x" + self.at], context.dof_index["y" + self.at],
-                      self.K_C, self.parallel, self.angular, self.L_C], dtype=float)
+                      self.K_C, self.parallel, self.angular, self.L_C, self.direction,
+                      self.phase, self.whirl, self.angular_phase], dtype=float)
         return _misalignment_kernel, p
 
 
