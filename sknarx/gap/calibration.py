@@ -87,15 +87,19 @@ class SweepModel:
         """
         if self.lead_s is None or self.settle_s <= self.lead_s:
             return self
-        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
-        _ = sim._setup
-        _ = sim._lambda_max_per_speed
+        sim = self._simulator(nuis, effects)
 
         def one(w):
             return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
                                             lead=self.lead_s)
 
         return dataclasses.replace(self, warm=dict(_pool().map(one, speeds)))
+
+    def _simulator(self, nuis, effects):
+        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
+        _ = sim._setup  # build once, before the threads share it
+        _ = sim._lambda_max_per_speed
+        return sim
 
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
@@ -106,9 +110,7 @@ class SweepModel:
         """``then(record)`` of each speed's simulated record, computed in the thread
         that simulated it (so one thread's post-processing overlaps the other's
         integration), in the order of ``speeds``."""
-        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
-        _ = sim._setup  # build once, before the threads share it
-        _ = sim._lambda_max_per_speed
+        sim = self._simulator(nuis, effects)
         warm = self.warm or {}
 
         def one(w):
@@ -154,31 +156,27 @@ class Calibration:
 
 
 def _split_x(classes):
-    """Layout of the optimisation vector: nuisance, then each effect's parameters."""
-    lo, hi, log, names = [], [], [], []
-    for n, (a, b, _sc, _start) in NUISANCE.items():
+    """Layout of the optimisation vector: nuisance, then each effect's parameters, with
+    each one's start in search space (an effect's stated ``start``, e.g. a crack's
+    element stiffness at the model's; else a quarter into its range)."""
+    lo, hi, log, names, x0 = [], [], [], [], []
+    for n, (a, b, _sc, start) in NUISANCE.items():
         lo.append(a)
         hi.append(b)
         log.append(False)
         names.append(("nuisance", n))
+        x0.append(start)
     for cls in classes:
         for n, (a, b, sc) in cls.bounds.items():
             is_log = sc == "log"
-            lo.append(np.log10(a) if is_log else a)
-            hi.append(np.log10(b) if is_log else b)
+            to_x = np.log10 if is_log else float
+            lo.append(to_x(a))
+            hi.append(to_x(b))
             log.append(is_log)
             names.append((cls.name, n))
-    return np.array(lo), np.array(hi), np.array(log), names
-
-
-def _class_of(classes, j):
-    """The effect class whose parameter sits at index ``j`` of the search vector."""
-    i = len(NUISANCE)
-    for cls in classes:
-        i += len(cls.bounds)
-        if j < i:
-            return cls
-    raise IndexError(j)
+            given = getattr(cls, "start", {}).get(n)
+            x0.append(to_x(given) if given is not None else lo[-1] + 0.25 * (hi[-1] - lo[-1]))
+    return np.array(lo), np.array(hi), np.array(log), names, np.array(x0)
 
 
 def _decode(x, classes, log, combo=None):
@@ -261,7 +259,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     """
     from scipy.stats import qmc
 
-    lo, hi, log, names = _split_x(classes)
+    lo, hi, log, names, x_start = _split_x(classes)
     speeds = np.asarray(speeds, dtype=float)
     keys, _, _, nons = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
     Mc, se_m = _measured_arrays(meas_feats, keys)
@@ -311,13 +309,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         return cal
 
     def start_vector(start):
-        x0 = np.array([v[3] for v in NUISANCE.values()] + [0.0] * (len(lo) - len(NUISANCE)))
-        for j in range(len(NUISANCE), len(lo)):
-            # an effect's stated start (e.g. a crack's element stiffness: the model's),
-            # else a quarter into its range
-            given = getattr(_class_of(classes, j), "start", {}).get(names[j][1])
-            x0[j] = ((np.log10(given) if log[j] else given) if given is not None
-                     else lo[j] + 0.25 * (hi[j] - lo[j]))
+        x0 = x_start.copy()
         if start is not None:
             x0[: len(start)] = start[: len(x0)]
         return np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))

@@ -188,34 +188,41 @@ class RotorBearingSimulator:
             )
         return speeds
 
-    def _run(self, omega_grid, n_settle, fs, speed_label, substeps=None, state=None):
+    def _run(self, omega_grid, n_settle, fs, speed_label, substeps=None, state=None,
+             stop=None):
         """Integrate; an automatically chosen step that proves unstable (stiff contact
         in an effect, say) is halved up to three times before giving up."""
         if substeps is not None:
             return self._run_once(omega_grid, n_settle, fs, speed_label, int(substeps),
-                                  state)
+                                  state, stop)
         substeps = self.substeps(fs, float(np.max(omega_grid)))
         for attempt in range(4):
             try:
                 return self._run_once(omega_grid, n_settle, fs, speed_label, substeps,
-                                      state)
+                                      state, stop)
             except SimulationDivergenceError:
                 if attempt == 3:
                     raise
                 substeps *= 2
 
-    def _run_once(self, omega_grid, n_settle, fs, speed_label, substeps, state=None):
+    def _run_once(self, omega_grid, n_settle, fs, speed_label, substeps, state=None,
+                  stop=None):
+        """One integration over ``omega_grid`` (sample ``n_settle`` is t = 0), from
+        ``state`` (default: rest on the static deflection), up to sample ``stop``
+        (default: the end; before t = 0 only the last sample is recorded)."""
         s = self._setup
         dt = 1.0 / fs
         # shaft angle 0 at the first recorded sample (t = 0)
         w = omega_grid
         phi0 = -float(np.sum(0.5 * (w[1 : n_settle + 1] + w[:n_settle])) * dt)
+        stop = w.size - 1 if stop is None else stop
+        record_from = min(n_settle, stop)
         q0, v0 = ((s.q_static.copy(), np.zeros(12)) if state is None else
                   (np.array(state[0], dtype=float), np.array(state[1], dtype=float)))
         Q, U, PHI, status, q_end, v_end = integrate(
-            q0, v0, np.ascontiguousarray(w, dtype=float), phi0,
-            -n_settle * dt, dt, int(substeps), n_settle, s.minv, s.C, s.G, s.K, s.fg, s.unb,
-            s.brg, s.kernel, s.kparams, self.divergence_limit,
+            q0, v0, np.ascontiguousarray(w[: stop + 1], dtype=float), phi0,
+            -n_settle * dt, dt, int(substeps), record_from, s.minv, s.C, s.G, s.K, s.fg,
+            s.unb, s.brg, s.kernel, s.kparams, self.divergence_limit,
         )
         if status >= 0:
             t_bad = (status - n_settle) * dt
@@ -227,7 +234,8 @@ class RotorBearingSimulator:
                 "the parameters (e.g. kB, clearance, damping)."
             )
         # columns as arrays: inner loops (calibration) skip the DataFrame entirely
-        columns = {"speed": w[n_settle:], "t": np.arange(Q.shape[0]) * dt, "u": U, "phi": PHI}
+        t = (record_from - n_settle + np.arange(Q.shape[0])) * dt
+        columns = {"speed": w[record_from : stop + 1], "t": t, "u": U, "phi": PHI}
         columns.update(zip(DOF_NAMES, Q.T, strict=True))
         columns["_state"] = (q_end, v_end)
         return columns
@@ -277,27 +285,13 @@ class RotorBearingSimulator:
             raise ValueError(f"lead must lie in [0, settle] s, got {lead!r} (settle {settle!r}).")
         n_settle = int(round(settle * fs))
         n_lead = int(round(lead * fs))
-        full = self._speed_grid(omega, fs, n_settle, n_settle + 1)
-        # the long run's first part, recording only its last sample (t = -lead); the
-        # shaft angle starts where the long run's does (0 at t = 0)
-        grid = np.ascontiguousarray(full[: n_settle - n_lead + 1])
-        s = self._setup
-        dt = 1.0 / fs
-        phi0 = -float(np.sum(0.5 * (full[1:] + full[:-1])) * dt)
-        if substeps is None:
-            substeps = self.substeps(fs, float(np.max(full)))
-        for _attempt in range(4):  # a step that proves unstable is halved
-            _, _, _, status, q, v = integrate(
-                s.q_static.copy(), np.zeros(12), grid, phi0,
-                -n_settle * dt, dt, int(substeps), grid.size - 1, s.minv, s.C, s.G, s.K,
-                s.fg, s.unb, s.brg, s.kernel, s.kparams, self.divergence_limit)
-            if status < 0:
-                return q.copy(), v.copy()
-            substeps *= 2
-        raise SimulationDivergenceError(
-            f"The simulation diverged while settling at speed {omega:g} rad/s: a "
-            f"displacement exceeded {self.divergence_limit} m or became NaN. Check the "
-            "parameters (e.g. kB, clearance, damping).")
+        # the long run's first part, up to t = -lead: the shaft angle starts where the
+        # long run's does (0 at t = 0)
+        grid = self._speed_grid(omega, fs, n_settle, n_settle + 1)
+        run = self._run(grid, n_settle, fs, f"speed {omega:g} rad/s (settling)", substeps,
+                        stop=n_settle - n_lead)
+        q, v = run["_state"]
+        return q.copy(), v.copy()
 
     def _speed_grid(self, omega, fs, n_settle, size):
         """The shaft speed (rad/s) at each sample instant, ``n_settle`` of them before
