@@ -219,7 +219,7 @@ class Rub(Effect):
 def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     ix, iy = int(p[0]), int(p[1])
     kc, par, ang, lc = p[2], p[3], p[4], p[5]
-    direction, phase, whirl, phase1 = p[6], p[7], p[8], p[9]
+    cd, sd, phase, whirl, phase1 = p[6], p[7], p[8], p[9], p[10]
     # parallel offset: a force at twice the shaft angle, (kc par / 2) e^{i direction}
     # (-1 + cos th + i whirl sin th), th = 2 phi + phase: planar along the offset with
     # its static part (whirl 0), an ellipse, or a circle (whirl +-1)
@@ -227,7 +227,6 @@ def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cove
     a = 0.5 * kc * par
     gx = -1.0 + math.cos(th)
     gy = whirl * math.sin(th)
-    cd, sd = math.cos(direction), math.sin(direction)
     # angular: a 1x bending moment, seen at the journal as a rotating force
     f1 = kc * lc * ang
     out[ix] += a * (cd * gx - sd * gy) - f1 * math.cos(phi + phase1)
@@ -280,8 +279,11 @@ class Misalignment(Effect):
 
     def force_kernel(self, context):
         p = np.array([context.dof_index["x" + self.at], context.dof_index["y" + self.at],
-                      self.K_C, self.parallel, self.angular, self.L_C, self.direction,
-                      self.phase, self.whirl, self.angular_phase], dtype=float)
+                      self.K_C, self.parallel, self.angular, self.L_C,
+                      # the offset's direction enters as its cosine and sine, computed
+                      # here once rather than at every force evaluation
+                      math.cos(self.direction), math.sin(self.direction), self.phase,
+                      self.whirl, self.angular_phase], dtype=float)
         return _misalignment_kernel, p
 
 
