@@ -96,13 +96,15 @@ def _gap(args) -> int:
     header = read_table(args.measured, what="measured data", nrows=1)
     order_domain = "t" not in header.columns and any(c.startswith("amp_") for c in header)
     if model != "paper" or order_domain:
+        from .gap.bode_report import write_bode_outputs
         from .gap.orderdomain import diagnose_order_domain
 
         if args.candidates or args.channels or args.no_update:
             logger.warning("--candidates, --channels and --no-update apply to time-series "
                            "sweeps; an order-domain (Bode) record is diagnosed against its "
                            "own library")
-        doc = diagnose_order_domain(args.measured, cfg, out, _command_line())
+        result = diagnose_order_domain(args.measured, cfg)
+        doc = write_bode_outputs(result, out, _command_line())
     else:
         from .gap.narx_view import narx_view_of
 

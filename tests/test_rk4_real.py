@@ -164,6 +164,32 @@ def test_the_swept_model_reproduces_the_beat_better_than_any_quasi_steady_fit(di
     assert abs(z1 - z2) > 3 * np.hypot(*(m["damping_ratio_std"] for m in doc["modes"]))
 
 
+def test_the_one_gap_core_gives_the_order_domain_path_its_old_answers(diagnosis):
+    # measured before the order-domain pipeline became a front end of the gap core
+    # (sknarx 03f326d, its own ranking, decision and bootstrap): the same numbers after
+    doc, _ = diagnosis
+    assert doc["gap_before"]["heldout_excess"] == pytest.approx(4891.161423250319, rel=1e-6)
+    assert [r["score"] for r in doc["ranking"][:3]] == pytest.approx(
+        [838.0171707149467, 1978.0777783449264, 3592.6287687459057], rel=1e-6)
+    assert [r["effect"] for r in doc["ranking"][:3]] == [["anisotropy", "runout"], "runout",
+                                                          "anisotropy"]
+    assert doc["shrink"] == pytest.approx(0.830711542911069, rel=1e-6)
+    assert doc["shrink_band"] == pytest.approx([0.7511042042848284, 0.8898824546877852],
+                                               rel=1e-6)
+    p = doc["ranking"][0]["params"]
+    assert [p["kx"], p["ky"], p["runout_amplitude_m"]] == pytest.approx(
+        [63346.74746820514, 79489.59048912465, 4.571523041462497e-06], rel=1e-6)
+    assert doc["critical_speeds_rpm"] == pytest.approx([1567.9563253804424,
+                                                        1643.8190527594081], rel=1e-6)
+    assert doc["nominal_calibration"]["bearing_stiffness_N_per_m"]["calibrated"] == (
+        pytest.approx(66162.51625529808, rel=1e-6))
+    # the untestable effects: the library's reason from each signature, the rig's own
+    # from its rotor file
+    why = {r["effect"]: r["reason"] for r in doc["ranking"] if r.get("testable") is False}
+    assert why["misalignment"].startswith("AC-coupled probes")
+    assert "2x" in why["crack"] and "1x this record holds" in why["crack"]
+
+
 def test_nominal_calibration_fixes_the_critical_speed(diagnosis):
     doc, _ = diagnosis
     crit = doc["nominal_calibration"]["first_critical_rpm"]
@@ -175,7 +201,7 @@ def test_nominal_calibration_fixes_the_critical_speed(diagnosis):
 
 
 def test_bode_loader_units_and_binning():
-    from sknarx.gap.orderdomain import bin_bode, load_bode
+    from sknarx.gap.bode import bin_bode, load_bode
 
     rows = load_bode(DATA, {"speed_column": "rpm", "amplitude_column": "amp_1x",
                             "amplitude_scale": 127e-6, "phase_column": "phase_1x_deg"})

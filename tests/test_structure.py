@@ -99,3 +99,25 @@ def test_no_pipeline_module_imports_the_test_equipment():
     users = sorted(m for m, deps in MODULES.items()
                    if "sknarx.testing" in deps and m != "sknarx.testing")
     assert not users, users
+
+
+def test_one_gap_core_and_front_ends_that_write_nothing():
+    """Both measurement front ends rank, decide and bootstrap through the gap core and
+    return a result; only the report modules write files."""
+    gap = PKG / "gap"
+    core_steps = {"rank", "decide", "preferred", "bootstrap_shrink", "log_shrink",
+                  "alternating_split", "search", "conclude"}
+    for path in gap.glob("*.py"):
+        if path.name == "core.py":
+            continue
+        tree = ast.parse(path.read_text())
+        defined = {n.name.lstrip("_") for n in ast.walk(tree)
+                   if isinstance(n, ast.FunctionDef) and n.col_offset == 0}
+        assert not defined & core_steps, f"{path.name} redefines {defined & core_steps}"
+    for front in ("diagnosis.py", "orderdomain.py"):
+        tree = ast.parse((gap / front).read_text())
+        calls = {n.func.attr for n in ast.walk(tree)
+                 if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)}
+        assert not calls & {"write_text", "to_csv", "savefig", "mkdir"}, front
+        assert "sknarx.gap.core" in imports(gap / front)
+        assert not imports(gap / front) & {"sknarx.gap.report", "sknarx.gap.bode_report"}

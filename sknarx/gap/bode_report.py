@@ -1,21 +1,47 @@
-"""Figures and report.html of an order-domain (Bode) diagnosis."""
+"""diagnosis.json, bode_fit.csv, figures and report.html of an order-domain diagnosis."""
 
 from __future__ import annotations
 
 import html
+import json
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
-from .._report import figure, page, quantity, table, value_range
+from .._report import figure, page, provenance, quantity, table, value_range
+from ..io import json_safe
 from ..plotting import plt, save
 
-__all__ = ["figures", "html_report"]
+__all__ = ["figures", "html_report", "write_bode_outputs"]
 
 
-def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None, z2=None):
+def write_bode_outputs(result, out, command: str) -> dict:
+    """Write the report of an order-domain :class:`~sknarx.gap.GapDiagnosis`:
+    ``diagnosis.json``, ``bode_fit.csv`` (measured and modelled 1x per revolution), the
+    figures and ``report.html``; returns the JSON document."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    c = result.curves
+    doc = json_safe(dict(result))
+    prov = provenance(command)
+    doc.update(sknarx_version=prov["sknarx_version"], command=command, provenance=prov)
+    _bode_fit_table(c["rows"], c["bins"], c["nominal"], c["calibrated"], c["corrected"],
+                    c["measurement"]).to_csv(out / "bode_fit.csv", index=False)
+    figs = figures(out, c["bins"], c["nominal"], c["calibrated"], c["corrected"], doc,
+                   c["quasi_steady"], z2=c["z2"], label=c["corrected_label"])
+    (out / "diagnosis.json").write_text(json.dumps(doc, indent=1))
+    (out / "report.html").write_text(html_report(doc, figs))
+    return doc
+
+
+def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None, z2=None, label=None):
+    """Bode, polar, run-up zoom and residual figures; ``label`` names the corrected
+    model (the verdict's by default)."""
     rpm = bins.rpm.to_numpy()
     z = bins.z.to_numpy()
-    lab = doc["verdict"] if isinstance(doc["verdict"], str) else " + ".join(doc["verdict"])
+    lab = label or (doc["verdict"] if isinstance(doc["verdict"], str)
+                    else " + ".join(doc["verdict"]))
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     a1.semilogy(rpm, np.abs(z) * 1e6, "k.", ms=3, label="measured (binned)")
     for s, style, name in ((s_nom, "c:", "nominal as described"),
@@ -115,9 +141,11 @@ def html_report(doc, figs):
         ([name, f"{val['heldout_excess_before']:.0f}", f"{val['heldout_excess_after']:.0f}",
           f"{100 * val['shrink']:.0f} %"] for name, val in doc.get("gap_by_band", {}).items()),
         ["band", "held-out excess before", "after", "removed"])
-    band = doc["shrink_band"]
+    band = doc.get("shrink_band")
+    band_text = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)" if band
+                 else "")
     body = f"""<h2>Verdict: {html.escape(v)} - {100 * doc['shrink']:.0f} % of the held-out gap
-removed (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)</h2>
+removed{band_text}</h2>
 <h2>Nominal calibration</h2><p>The described rotor's first critical speed is
 {quantity(fc['nominal'], 'rpm')} {html.escape(measured_fc)}: the bearing stiffness was
 calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N/m')}
@@ -188,3 +216,18 @@ def _params(params) -> str:
             parts.append(f"{key} {quantity(value, unit, 4)}")
     return "; ".join(parts)
 
+
+def _bode_fit_table(rows, bins, s_nom, s_cal, s_best, meas_cfg):
+    """Measured and modelled 1x per revolution, in the input's units and phase convention
+    (the models, computed per speed bin, are interpolated to each revolution's speed)."""
+    scale = float(meas_cfg.get("amplitude_scale", 1.0))
+    rpm = rows.rpm.to_numpy()
+    b = bins.rpm.to_numpy()  # beyond the end bins' centres the end values hold
+    out = {"rpm": rpm, "measured_amp": np.abs(rows.z.to_numpy()) / scale,
+           "measured_phase_deg": np.degrees(np.angle(rows.z.to_numpy()))}
+    for name, s in (("nominal", s_nom), ("corrected", s_best)):
+        zi = np.interp(rpm, b, s.real) + 1j * np.interp(rpm, b, s.imag)
+        out[f"{name}_amp"] = np.abs(zi) / scale
+        out[f"{name}_phase_deg"] = np.degrees(np.angle(zi))
+    return pd.DataFrame(out)[["rpm", "measured_amp", "measured_phase_deg", "nominal_amp",
+                              "nominal_phase_deg", "corrected_amp", "corrected_phase_deg"]]

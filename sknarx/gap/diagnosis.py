@@ -1,11 +1,13 @@
-"""Which unmodelled effect causes the sim-to-real gap, and how far adding it shrinks it.
+"""The time-series front end: stepped-speed sweeps against the nonlinear simulator.
 
-Procedure (all on order-domain features, see :mod:`sknarx.gap.features`):
+Procedure (all on order-domain features, see :mod:`sknarx.gap.features`); the split,
+search, ranking, verdict and shrink are the gap core's (:mod:`sknarx.gap.core`):
 
 1. Split the speed steps into training (every other step) and held-out steps.
-2. Calibrate the nominal model's nuisance parameters (unbalance, stiffness and
-   damping scales) on the training steps; the remaining held-out gap is the gap
-   *before*. If it is within the noise floor, the verdict is ``no-gap``.
+2. Update the nominal rotor's linear parameters on the training steps' steady 1x
+   (:mod:`sknarx.gap.updating`), then calibrate its nuisance parameters (unbalance,
+   stiffness and damping scales); the remaining held-out gap is the gap *before*. If
+   it is within the noise floor, the verdict is ``no-gap``.
 3. Calibrate every candidate effect (with the nuisances) on the training steps and
    measure the held-out gap *after*; rank by the after-gap plus a penalty of two
    per effect parameter (an AIC on the chi-square scale).
@@ -16,7 +18,7 @@ Procedure (all on order-domain features, see :mod:`sknarx.gap.features`):
    the best single if it removes most of what the single left.
 5. The verdict is the best single effect or pair if it removes at least
    ``min_shrink`` of the held-out gap and ``min_log_shrink`` of its logarithm
-   (a breadth check: see :func:`decide`), else ``unexplained``.
+   (a breadth check: see :func:`sknarx.gap.core.decide`), else ``unexplained``.
 
 Thresholds are fixed on pilot trials of ``benchmarks/bench_gap_blind.py`` and
 then frozen (see ``DiagnosisSettings``).
@@ -30,63 +32,34 @@ from dataclasses import asdict
 
 import numpy as np
 import pandas as pd
-from joblib import Parallel, delayed
 
 from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, heldout_gap
+from .core import (
+    CandidateFit,
+    FrontEnd,
+    alternating_split,
+    conclude,
+    decide,
+    public_ranking,
+    search,
+    table_evidence,
+)
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import HARMONIC_TOL, regions
+from .result import GapDiagnosis
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
 
-__all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
+__all__ = ["LIBRARY", "DiagnosisSettings", "diagnose", "decide"]
 
 logger = logging.getLogger(__name__)
-
-
-def _parallel(settings, jobs, total, desc):
-    """Run ``jobs`` on threads with a progress bar (results in submission order)."""
-    gen = Parallel(n_jobs=settings.n_jobs, prefer="threads", return_as="generator")(jobs)
-    return list(progress_bar(gen, total=total, desc=desc, unit="fit"))
 
 #: Candidate effects searched by default (measurement noise is characterised, not
 #: searched: every measurement has some).
 LIBRARY = ("rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "runout",
            "speed-fluctuation")
-
-
-def _shrink(before, after):
-    return float(1.0 - after / before) if before > 0 else 0.0
-
-
-def _bootstrap_shrink(cmp_before, cmp_after, n, seed):
-    """5-95 % band of the shrink, resampling held-out speed steps."""
-    rng = np.random.default_rng(seed)
-    b = cmp_before.groupby("speed")["excess"].sum()
-    a = cmp_after.groupby("speed")["excess"].sum().reindex(b.index).fillna(0.0)
-    speeds = b.index.to_numpy()
-    vals = []
-    for _ in range(n):
-        pick = rng.choice(len(speeds), len(speeds), replace=True)
-        sb, sa = b.to_numpy()[pick].sum(), a.to_numpy()[pick].sum()
-        vals.append(_shrink(sb, sa))
-    return [float(np.percentile(vals, 5)), float(np.percentile(vals, 95))]
-
-
-def _evidence(cmp_before, cmp_after, k=3):
-    """The features whose gap the candidate removed most (signature evidence)."""
-    key = ["channel", "feature", "window"]
-    b = cmp_before.groupby(key)["excess"].sum()
-    a = cmp_after.groupby(key)["excess"].sum().reindex(b.index).fillna(0.0)
-    gain = (b - a).sort_values(ascending=False)
-    total = b.sum()
-    out = []
-    for (ch, feat, win), g in gain.head(k).items():
-        if g <= 0:
-            break
-        out.append(f"{feat} at {ch} ({win}): {100 * g / total:.0f} % of the gap removed")
-    return out
 
 
 def _steady_1x(meas, speeds, channels):
@@ -162,9 +135,88 @@ def _update_summary(update) -> dict | None:
     }
 
 
+class _SweepFrontEnd(FrontEnd):
+    """The time-series front end's fits: the nonlinear simulator (with the nuisance
+    scalars) calibrated on the training speeds' order features."""
+
+    def __init__(self, model, meas, train, held, cmp0, settings, nuis_start):
+        self.model, self.meas, self.train, self.held = model, meas, train, held
+        self.cmp0, self.settings, self.nuis_start = cmp0, settings, nuis_start
+        self._lead_x = None
+
+    def _result(self, names, cal):
+        classes = [EFFECTS[n] for n in names]
+        try:
+            E, cmp = heldout_gap(self.model, self.meas, self.held, cal, classes)
+        except SimulationDivergenceError:
+            # calibrated on the training speeds, unstable at a held-out one: rejected
+            E, cmp = float("inf"), None
+        params = _plain_params(names, cal.effect_params)
+        return CandidateFit(
+            names=tuple(names), params=params if len(names) > 1 else params[0],
+            params_std={k: v for k, v in cal.std.items() if not k.startswith("nuisance")},
+            n_params=cal.n_params - len(NUISANCE), heldout_excess=E, cmp=cmp,
+            details={"nuisance": cal.nuisance,
+                     "evidence": table_evidence(self.cmp0, cmp) if cmp is not None else
+                     ["the calibrated model diverges at a held-out speed"],
+                     "signature": [EFFECTS[n].signature for n in names]},
+            state=cal)
+
+    def _calibrate(self, names, **kw):
+        return calibrate(self.model, self.meas, self.train, [EFFECTS[n] for n in names],
+                         **{"max_nfev": self.settings.max_nfev, **kw})
+
+    def fit(self, names):
+        cal = self._calibrate(names, starts=[self.nuis_start], n_probe=self.settings.n_probe)
+        return self._result(names, cal)
+
+    def continue_fit(self, fit):
+        # pairs start from the lead's first fit, whatever its continuation does
+        self._lead_x = fit.state.x
+        return self._result(fit.names, self._calibrate(fit.names, starts=[fit.state.x],
+                                                       n_probe=0))
+
+    def _pair_kw(self, lead):
+        # only the partner is probed; the lead keeps its discrete settings (a crack's
+        # station) and starts from its first fit
+        x0 = self._lead_x if self._lead_x is not None else lead.state.x
+        return {"starts": [x0], "probe_from": len(x0), "n_probe": self.settings.n_probe,
+                "fixed": [discrete_settings(lead.state, 0, EFFECTS[lead.names[0]]), None]}
+
+    def partners(self, lead, others, k):
+        # an effect masked by a dominant one fits badly on its own: score each
+        # candidate by probing it on top of the leading fit instead
+        scores = [(self._calibrate((lead.names[0], p), max_nfev=0,
+                                   **self._pair_kw(lead)).cost, p)
+                  for p in progress_bar(others, desc=f"partners of {lead.names[0]}",
+                                        unit="probe")]
+        return [p for _, p in sorted(scores)[:k]]
+
+    def fit_pair(self, lead, partner):
+        names = (lead.names[0], partner)
+        return self._result(names, self._calibrate(names, **self._pair_kw(lead)))
+
+    def refit_members(self, pair):
+        # a pair must not take the credit for one member's convergence either (a rub
+        # that found its basin only on top of a runout, a crack whose fit the pair
+        # merely continued): each member runs alone from the pair's fit
+        x = pair.state.x
+        k = len(NUISANCE)
+        width = [len(EFFECTS[n].bounds) for n in pair.names]
+        out = []
+        for member in (0, 1):
+            i = k + sum(width[:member])
+            name = pair.names[member]
+            start = np.concatenate([x[:k], x[i : i + width[member]]])
+            cal = self._calibrate((name,), starts=[start], n_probe=0,
+                                  fixed=[discrete_settings(pair.state, member, EFFECTS[name])])
+            out.append(self._result((name,), cal))
+        return out
+
+
 def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
              candidates=LIBRARY, settings: DiagnosisSettings | None = None,
-             progress=None, exhaustive: bool = False) -> dict:
+             progress=None, exhaustive: bool = False) -> GapDiagnosis:
     """Diagnose a stepped-speed measurement against the nominal simulator.
 
     Parameters
@@ -175,14 +227,32 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         See :func:`sknarx.gap.load_measured`.
     base : RotorParameters, optional
         Nominal rotor (the paper's by default).
+    channels : sequence of str, optional
+        Channels to compare (every DOF column by default).
     candidates : sequence of str
         Canonical effect names to search.
+    settings : DiagnosisSettings, optional
+        Thresholds and search effort (the frozen defaults by default).
+    progress : callable, optional
+        Called with a short message after each phase (default: the package logger).
+    exhaustive : bool
+        Search the candidates even when the gap is within the noise floor.
 
     Returns
     -------
-    dict
-        ``verdict``, ``ranking``, ``where``, ``shrink`` and the details (see
-        ``docs/gap.md``); ``_tables`` holds the comparison tables for reports.
+    GapDiagnosis
+        Reads like ``diagnosis.json``: ``verdict``, ``ranking``, ``where``, ``shrink``
+        and the details (see ``docs/gap.md``); its ``tables`` hold the comparison
+        tables and its ``base`` the updated nominal rotor. The report is written by
+        the caller: :func:`sknarx.gap.report.write_gap_outputs`.
+
+    Examples
+    --------
+    >>> from sknarx.gap import diagnose
+    >>> from sknarx.testing import make_trial
+    >>> measured, truth = make_trial("none", seed=0)  # doctest: +SKIP
+    >>> diagnose(measured)["verdict"]  # doctest: +SKIP
+    'no-gap'
     """
     from .measured import check_measured
 
@@ -201,7 +271,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     transient_s = settings.transient_s if starts_transient else 0.0
     settle_s = 0.0 if starts_transient else settings.settle_s
     speeds = np.array(info["speeds"])
-    train, held = speeds[0::2], speeds[1::2]
+    is_train = alternating_split(speeds.size)
+    train, held = speeds[is_train], speeds[~is_train]
     logger.info("%d speed steps x %d channel(s) at %.0f Hz (%s): extracting order features",
                 speeds.size, len(channels), info["fs"],
                 f"records start with a transient, first {transient_s:g} s kept apart"
@@ -238,7 +309,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     tick("nuisance calibration")
     e0 = E0 / max(len(cmp0), 1)
     n_features = max(len(cmp0), 1)
-    result = {
+    doc = {
         "verdict": None, "ranking": [], "where": regions(cmp_all),
         "shrink": 0.0,
         "gap_before": {"heldout_excess": E0, "per_feature": e0,
@@ -257,11 +328,10 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         "settings": asdict(settings),
         "nominal_update": _update_summary(update),
     }
-    tables = {"before": cmp0, "all": cmp_all}
-    result["_base"] = base  # the updated nominal rotor (not in the JSON document)
+    result = GapDiagnosis(doc, front_end="time-series",
+                          tables={"before": cmp0, "all": cmp_all}, base=base)
     if e0 <= settings.no_gap_per_feature and not exhaustive:
-        result["verdict"] = "no-gap"
-        result["_tables"] = tables
+        doc["verdict"] = "no-gap"
         return result
 
     # the nuisance-only fit absorbs what it can of an effect (a crack's loss of mean
@@ -271,193 +341,25 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     nuis_start = cal0.x.copy()
     nuis_start[[list(NUISANCE).index("stiffness_scale"),
                 list(NUISANCE).index("damping_scale")]] = 1.0
-
-    def _held(classes, names, cal):
-        try:
-            E, cmp = heldout_gap(model, meas, held, cal, classes)
-        except SimulationDivergenceError:
-            # calibrated on the training speeds, unstable at a held-out one: rejected
-            E, cmp = float("inf"), None
-        return names, cal, E, cmp
-
-    def run(names):
-        classes = [EFFECTS[n] for n in names]
-        cal = calibrate(model, meas, train, classes, starts=[nuis_start],
-                        max_nfev=settings.max_nfev, n_probe=settings.n_probe)
-        return _held(classes, names, cal)
-
+    front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, nuis_start)
     logger.info("held-out gap %.3g per feature (no-gap floor %.3g): fitting %d effect "
                 "candidate(s)", e0, settings.no_gap_per_feature, len(candidates))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        singles = _parallel(settings, (delayed(run)((c,)) for c in candidates),
-                            len(candidates), "effect candidates")
-    tick("single candidates")
-    ranked = _rank(singles, E0, cmp0)
-    best = ranked[0] if ranked else None
-    pairs = []
-    if best is not None:
-        lead = best["_names"][0]
-        lead_x = best["_cal"].x
-
-        def continue_single():
-            # a pair gets a warm-started run from the lead's fit; so does the lead, or a
-            # partner would take the credit for the lead's own convergence. Done whether
-            # or not pairs are tried, so the verdict does not depend on the pair trigger
-            classes = [EFFECTS[lead]]
-            cal = calibrate(model, meas, train, classes, starts=[lead_x],
-                            max_nfev=settings.max_nfev, n_probe=0)
-            return _held(classes, (lead,), cal)
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            more = continue_single()
-        if more[2] < best["_E"]:
-            singles = [more if r[0] == (lead,) else r for r in singles]
-            best = _rank(singles, E0, cmp0)[0]
-        tick("lead continued")
-    if best is not None and best["_E"] / n_features > settings.pair_trigger:
-        # what the best single effect leaves is still a gap: pair it with every other
-        # candidate, warm-started from the lead's first fit (only the partner is probed)
-
-        # the leading effect keeps its discrete settings (a crack's station) in pairs
-        lead_fixed = discrete_settings(best["_cal"], 0, EFFECTS[lead])
-
-        def probe_partner(partner):
-            # an effect masked by a dominant one fits badly on its own: score each
-            # candidate by probing it on top of the leading fit instead
-            cal = calibrate(model, meas, train, [EFFECTS[lead], EFFECTS[partner]],
-                            starts=[lead_x], max_nfev=0, probe_from=len(lead_x),
-                            fixed=[lead_fixed, None], n_probe=settings.n_probe)
-            return cal.cost, partner
-
-        def run_pair(partner):
-            classes = [EFFECTS[lead], EFFECTS[partner]]
-            cal = calibrate(model, meas, train, classes, starts=[lead_x],
-                            max_nfev=settings.max_nfev, probe_from=len(lead_x),
-                            fixed=[lead_fixed, None], n_probe=settings.n_probe)
-            return _held(classes, (lead, partner), cal)
-
-        def refit_member(names, pair_cal, member):
-            # one member of a pair, on its own, started from the pair's fit
-            x = pair_cal.x
-            k = len(NUISANCE)
-            width = [len(EFFECTS[n].bounds) for n in names]
-            i = k + sum(width[:member])
-            start = np.concatenate([x[:k], x[i : i + width[member]]])
-            classes = [EFFECTS[names[member]]]
-            cal = calibrate(model, meas, train, classes, starts=[start],
-                            max_nfev=settings.max_nfev, n_probe=0,
-                            fixed=[discrete_settings(pair_cal, member, classes[0])])
-            return _held(classes, (names[member],), cal)
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            others = [c for c in candidates if c != lead]
-            scores = _parallel(settings, (delayed(probe_partner)(c) for c in others),
-                               len(others), f"partners of {lead}")
-            partners = [p for _, p in sorted(scores)[: settings.n_partners]]
-            pairs = _parallel(settings, (delayed(run_pair)(c) for c in partners),
-                              len(partners), "pairs")
-            # a pair must not take the credit for one member's convergence either (a
-            # rub that found its basin only on top of a runout, a crack whose fit the
-            # pair merely continued): each member of the best pair runs alone from it
-            refits = []
-            if pairs:
-                top = _rank(pairs, E0, cmp0)[0]
-                refits = _parallel(settings, (delayed(refit_member)(top["_names"],
-                                                                    top["_cal"], m)
-                                              for m in (0, 1)), 2, "pair members alone")
-        for new in refits:
-            singles = [new if old[0] == new[0] and new[2] < old[2] else old
-                       for old in singles]
-        tick("pairs")
-    ranked_all = _rank(singles + pairs, E0, cmp0)
-    choice = decide(e0, ranked_all, settings, n_features)
-    if choice == "no-gap":
-        result["verdict"] = "no-gap"
-    elif choice is not None:
-        names = choice["_names"]
-        result["verdict"] = names[0] if len(names) == 1 else list(names)
-        result["shrink"] = choice["_shrink"]
-        result["shrink_band"] = _bootstrap_shrink(cmp0, choice["_cmp"], settings.n_bootstrap,
-                                                  settings.seed)
-        result["gap_after"] = {"heldout_excess": choice["_E"],
-                               "rms_gap_m": float(np.sqrt(np.mean(choice["_cmp"]["gap"] ** 2)))}
-        result["regions_after"] = _regions_after(result["where"], choice["_cmp"], cmp0)
-        tables["after"] = choice["_cmp"]
-    else:
-        result["verdict"] = "unexplained"
-        result["shrink"] = max(ranked_all[0]["_shrink"], 0.0) if ranked_all else 0.0
-    result["n_heldout_features"] = n_features
-    result["ranking"] = [{k: v for k, v in r.items() if not k.startswith("_")}
-                         for r in ranked_all]
-    result["_tables"] = tables
+        ranked = search(front, candidates, E0, cmp0, n_features, settings, tick)
+    choice = decide(e0, ranked, settings, n_features)
+    doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
+    if isinstance(choice, dict):
+        result.tables["after"] = choice["_cmp"]
+    doc["n_heldout_features"] = n_features
+    doc["ranking"] = public_ranking(ranked)
     return result
 
 
-def decide(e0, ranking, settings, n_features):
-    """The verdict from the held-out gap per feature and the ranked candidates.
-
-    Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained). Kept
-    separate from the search so thresholds can be fixed on pilot trials and then
-    applied unchanged to fresh ones.
-
-    A candidate explains the gap when it removes ``min_shrink`` of the held-out
-    excess *and* ``min_log_shrink`` of its logarithm: the excess is dominated by the
-    few largest features, and an effect that matches them while breaking many
-    others (a bearing rattling broadband to mimic an electrical line, say) must
-    not pass. A pair replaces the best single only if the single leaves more than
-    ``pair_trigger`` excess per feature and the pair removes ``pair_gain`` of it.
-    """
-    if e0 <= settings.no_gap_per_feature:
-        return "no-gap"
-    singles = [r for r in ranking if len(r["_names"]) == 1]
-    pairs = [r for r in ranking if len(r["_names"]) == 2]
-    if not singles:
-        return None
-    best = min(singles, key=lambda r: r["score"])
-    choice = best
-    if pairs and best["_E"] / n_features > settings.pair_trigger:
-        pb = min(pairs, key=lambda r: r["score"])
-        if pb["_E"] <= (1.0 - settings.pair_gain) * best["_E"]:
-            choice = pb
-    ok = (choice["_shrink"] >= settings.min_shrink
-          and choice["log_shrink"] >= settings.min_log_shrink)
-    return choice if ok else None
 
 
-def _log_shrink(cmp0, cmp):
-    if cmp is None:
-        return -np.inf
-    key = ["speed", "window", "channel", "feature"]
-    b = cmp0.set_index(key)["excess"]
-    a = cmp.set_index(key)["excess"].reindex(b.index).fillna(0.0)
-    lb = np.log1p(b).sum()
-    return float(1.0 - np.log1p(a).sum() / lb) if lb > 0 else 0.0
 
 
-def _rank(results, E0, cmp0):
-    out = []
-    for names, cal, E, cmp in results:
-        p_eff = cal.n_params - len(NUISANCE)
-        shrink = _shrink(E0, E)
-        out.append({
-            "effect": names[0] if len(names) == 1 else list(names),
-            "params": (_plain_params(names, cal.effect_params) if len(names) > 1 else
-                       _plain_params(names, cal.effect_params)[0]),
-            "params_std": {k: v for k, v in cal.std.items() if not k.startswith("nuisance")},
-            "nuisance": cal.nuisance,
-            "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink,
-            "log_shrink": _log_shrink(cmp0, cmp),
-            "score": E + 2.0 * p_eff,
-            "evidence": _evidence(cmp0, cmp) if cmp is not None else
-            ["the calibrated model diverges at a held-out speed"],
-            "signature": [EFFECTS[n].signature for n in names],
-            "_names": names, "_shrink": shrink, "_E": E, "_cmp": cmp, "_cal": cal,
-        })
-    out.sort(key=lambda r: r["score"])
-    return out
 
 
 def _plain_params(names, effect_params):
@@ -467,18 +369,6 @@ def _plain_params(names, effect_params):
             else p for n, p in zip(names, effect_params, strict=True)]
 
 
-def _regions_after(where, cmp_after, cmp_before):
-    out = []
-    def select(c, r):
-        lo, hi = r["speed_range"]
-        return c[(c.channel == r["channel"]) & (c.feature == r["order"])
-                 & (c.window == r["window"]) & (c.speed >= lo) & (c.speed <= hi)]
-
-    for r in where:
-        b = select(cmp_before, r)["excess"].sum()
-        a = select(cmp_after, r)["excess"].sum()
-        out.append({**r, "heldout_excess_before": float(b), "heldout_excess_after": float(a)})
-    return out
 
 
 def _noise_summary(meas):

@@ -63,7 +63,7 @@ def narx_view(measured, simulated, channel, base, ny=2, nu=2, degree=2, max_term
     }
 
 
-def narx_view_of(result: dict, measured, base) -> dict:
+def narx_view_of(result, measured, base) -> dict:
     """The NARX view of a :func:`~sknarx.gap.diagnose` result: measured records against
     the (updated) nominal rotor with the calibrated nuisance parameters, first channel."""
     import pandas as pd
@@ -74,7 +74,7 @@ def narx_view_of(result: dict, measured, base) -> dict:
     measured, _ = check_measured(measured, result["channels"])
     ch = result["channels"][0]
     # the rotor the diagnosis compared with: updated, and settled as the records were
-    base = result.get("_base") or base
+    base = result.base if result.base is not None else base
     model = SweepModel(base=base, fs=result["sampling"]["fs_hz"],
                        n_samples=result["sampling"]["samples_per_step"], channels=(ch,),
                        settle_s=result.get("records", {}).get("simulation_settle_s", 0.0))

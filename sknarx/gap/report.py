@@ -49,11 +49,12 @@ def heatmap(cmp, path, title):
     return Path(path)
 
 
-def write_gap_outputs(result: dict, out, command: str, narx: dict | None = None) -> dict:
-    """Write ``diagnosis.json``, the figures and ``report.html``; returns the JSON document."""
+def write_gap_outputs(result, out, command: str, narx: dict | None = None) -> dict:
+    """Write ``diagnosis.json``, the figures and ``report.html`` of a time-series
+    :class:`~sknarx.gap.GapDiagnosis`; returns the JSON document."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    tables = result.get("_tables", {})
+    tables = result.tables
     figs = {}
     if "all" in tables:
         figs["map"] = heatmap(tables["all"], out / "gap_map.png",

@@ -136,8 +136,7 @@ class RigInfluenceModel:
     speeds_rpm: dict
     probes: tuple
     units_m: float = MIL_M
-    n_starts: int = 4  # the nominal and 3 random starts (on the RK-4 campaign all 12 tried
-    # reached the same optimum)
+    n_starts: int = 4  # the nominal and 3 random starts (a local search per start)
     rotor: object = field(init=False)
     names: tuple = field(init=False)
 

@@ -1,0 +1,291 @@
+"""The gap core both measurement front ends share: split, search, rank, decide, shrink.
+
+A front end (time-series sweeps in :mod:`sknarx.gap.diagnosis`, order-tracked Bode
+records in :mod:`sknarx.gap.orderdomain`) owns its model: it calibrates the nominal
+model and fits each candidate effect on the training part of the record, and returns
+the held-out comparison table of each fit (one row per held-out feature: ``speed`` in
+rad/s, ``window``, ``channel``, ``feature``, ``gap`` in m, ``z2`` and ``excess``, see
+:func:`sknarx.gap.compare`). Everything after that is decided here, the same way for
+both:
+
+* the split into training and held-out speeds (:func:`alternating_split`);
+* which candidates and pairs are fitted (:func:`search`, through the front end's
+  :class:`FrontEnd` hooks);
+* the ranking by held-out excess plus two per effect parameter, an AIC on the
+  chi-square scale (:func:`rank`);
+* the verdict (:func:`decide`, thresholds from the front end's
+  :class:`~sknarx.gap.DiagnosisSettings`);
+* the shrink of the held-out gap with its bootstrap band over held-out speeds
+  (:func:`bootstrap_shrink`) and where the gap was and what remains of it
+  (:func:`~sknarx.gap.regions`, :func:`regions_after`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from joblib import Parallel, delayed
+
+from .._progress import progress_bar
+
+__all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
+           "decide", "log_shrink", "preferred", "public_ranking", "rank", "regions_after",
+           "search", "shrink", "table_evidence"]
+
+logger = logging.getLogger(__name__)
+
+_KEY = ["speed", "window", "channel", "feature"]
+
+
+def alternating_split(n: int, block: int = 1) -> np.ndarray:
+    """Training mask of ``n`` speed-ordered units: alternating blocks of ``block`` units,
+    the first for training. The held-out units lie between training ones, so a fit is
+    judged where it interpolates, never where it extrapolates."""
+    return (np.arange(n) // block) % 2 == 0
+
+
+def shrink(before: float, after: float) -> float:
+    """Share of a held-out excess removed (0 when there was none)."""
+    return float(1.0 - after / before) if before > 0 else 0.0
+
+
+def log_shrink(cmp_before: pd.DataFrame, cmp_after: pd.DataFrame | None) -> float:
+    """Share of ``sum(log(1 + excess))`` removed: the breadth of a fit's gain (the
+    excess is dominated by its largest features; this is not)."""
+    if cmp_after is None:
+        return -np.inf
+    b = cmp_before.set_index(_KEY)["excess"]
+    a = cmp_after.set_index(_KEY)["excess"].reindex(b.index).fillna(0.0)
+    lb = np.log1p(b).sum()
+    return float(1.0 - np.log1p(a).sum() / lb) if lb > 0 else 0.0
+
+
+def bootstrap_shrink(cmp_before: pd.DataFrame, cmp_after: pd.DataFrame, n: int,
+                     seed: int) -> list[float]:
+    """5-95 % band of the shrink, resampling held-out speeds with replacement."""
+    rng = np.random.default_rng(seed)
+    b = cmp_before.groupby("speed")["excess"].sum()
+    a = cmp_after.groupby("speed")["excess"].sum().reindex(b.index).fillna(0.0)
+    vb, va = b.to_numpy(), a.to_numpy()
+    vals = []
+    for _ in range(n):
+        pick = rng.choice(len(vb), len(vb), replace=True)
+        vals.append(shrink(vb[pick].sum(), va[pick].sum()))
+    return [float(np.percentile(vals, 5)), float(np.percentile(vals, 95))]
+
+
+def table_evidence(cmp_before: pd.DataFrame, cmp_after: pd.DataFrame, k: int = 3) -> list:
+    """The features whose gap a fit removed most (its signature evidence), as text."""
+    key = ["channel", "feature", "window"]
+    b = cmp_before.groupby(key)["excess"].sum()
+    a = cmp_after.groupby(key)["excess"].sum().reindex(b.index).fillna(0.0)
+    gain = (b - a).sort_values(ascending=False)
+    total = b.sum()
+    out = []
+    for (ch, feat, win), g in gain.head(k).items():
+        if g <= 0:
+            break
+        out.append(f"{feat} at {ch} ({win}): {100 * g / total:.0f} % of the gap removed")
+    return out
+
+
+def regions_after(where: list, cmp_after: pd.DataFrame, cmp_before: pd.DataFrame) -> list:
+    """Each gap region with its held-out excess before and after the verdict."""
+    def select(c, r):
+        lo, hi = r["speed_range"]
+        return c[(c.channel == r["channel"]) & (c.feature == r["order"])
+                 & (c.window == r["window"]) & (c.speed >= lo) & (c.speed <= hi)]
+
+    return [{**r, "heldout_excess_before": float(select(cmp_before, r)["excess"].sum()),
+             "heldout_excess_after": float(select(cmp_after, r)["excess"].sum())}
+            for r in where]
+
+
+@dataclass
+class CandidateFit:
+    """One candidate (a single effect or a pair) fitted by a front end.
+
+    ``n_params`` counts the parameters the candidate adds to the calibrated nominal
+    model (the AIC's penalty); ``heldout_excess`` and ``cmp`` are its held-out excess
+    and comparison table (``inf`` and None when the fitted model diverged at a held-out
+    speed); ``details`` are front-end entries for the ranking (nuisances, evidence,
+    fitted unbalance, ...); ``state`` is the front end's own fit, for warm starts.
+    """
+
+    names: tuple
+    params: Any
+    params_std: dict
+    n_params: int
+    heldout_excess: float
+    cmp: pd.DataFrame | None
+    details: dict = field(default_factory=dict)
+    state: Any = None
+
+
+def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
+    """Ranking entries of fitted candidates, best first: held-out excess after plus two
+    per added parameter. Keys starting with ``_`` are for the core, not the document."""
+    out = []
+    for f in fits:
+        E = f.heldout_excess
+        out.append({
+            "effect": f.names[0] if len(f.names) == 1 else list(f.names),
+            "params": f.params, "params_std": f.params_std,
+            "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink(E0, E),
+            "log_shrink": log_shrink(cmp0, f.cmp), "score": E + 2.0 * f.n_params,
+            **f.details,
+            "_names": tuple(f.names), "_shrink": shrink(E0, E), "_E": E, "_cmp": f.cmp,
+            "_fit": f,
+        })
+    out.sort(key=lambda r: r["score"])
+    return out
+
+
+def preferred(ranking: list, settings, n_features: int):
+    """The best single candidate, or the best pair where it earns its place: the single
+    leaves more than ``pair_trigger`` excess per feature, the pair removes
+    ``pair_gain`` of what the single leaves and (with ``pair_margin`` set) scores at
+    least that much below it. None without any single."""
+    singles = [r for r in ranking if len(r["_names"]) == 1]
+    pairs = [r for r in ranking if len(r["_names"]) == 2]
+    if not singles:
+        return None
+    best = min(singles, key=lambda r: r["score"])
+    if pairs and best["_E"] / n_features > settings.pair_trigger:
+        pb = min(pairs, key=lambda r: r["score"])
+        margin = getattr(settings, "pair_margin", None)
+        if (pb["_E"] <= (1.0 - settings.pair_gain) * best["_E"]
+                and (margin is None or best["score"] - pb["score"] >= margin)):
+            return pb
+    return best
+
+
+def decide(e0: float, ranking: list, settings, n_features: int):
+    """The verdict from the held-out gap per feature and the ranked candidates.
+
+    Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained). Kept
+    separate from the search so thresholds can be fixed on pilot trials and then
+    applied unchanged to fresh ones.
+
+    A candidate explains the gap when it removes ``min_shrink`` of the held-out
+    excess *and* ``min_log_shrink`` of its logarithm: the excess is dominated by the
+    few largest features, and an effect that matches them while breaking many
+    others (a bearing rattling broadband to mimic an electrical line, say) must
+    not pass. Which candidate is judged: :func:`preferred`.
+    """
+    if e0 <= settings.no_gap_per_feature:
+        return "no-gap"
+    choice = preferred(ranking, settings, n_features)
+    if choice is None:
+        return None
+    ok = (choice["_shrink"] >= settings.min_shrink
+          and choice["log_shrink"] >= settings.min_log_shrink)
+    return choice if ok else None
+
+
+class FrontEnd:
+    """What :func:`search` asks of a measurement front end.
+
+    ``fit`` is required; the other hooks default to the plain search (no continued
+    lead, every other candidate a partner, no member refits).
+    """
+
+    def fit(self, names: tuple) -> CandidateFit:
+        """Calibrate the candidate ``names`` (one effect) on the training part."""
+        raise NotImplementedError
+
+    def continue_fit(self, fit: CandidateFit) -> CandidateFit | None:
+        """A further run of the leading single from its own fit (None: not offered)."""
+        return None
+
+    def partners(self, lead: CandidateFit, others: list, k: int) -> list:
+        """Up to ``k`` candidates worth pairing with the lead, most promising first."""
+        return list(others)[:k]
+
+    def fit_pair(self, lead: CandidateFit, partner: str) -> CandidateFit:
+        """Calibrate the lead with ``partner``."""
+        raise NotImplementedError
+
+    def refit_members(self, pair: CandidateFit) -> list:
+        """Each member of the best pair alone, started from the pair's fit."""
+        return []
+
+
+def _parallel(n_jobs, calls, desc):
+    """Run ``calls`` (zero-argument callables) on threads with a progress bar; results
+    in submission order."""
+    gen = Parallel(n_jobs=n_jobs, prefer="threads", return_as="generator")(
+        delayed(c)() for c in calls)
+    return list(progress_bar(gen, total=len(calls), desc=desc, unit="fit"))
+
+
+def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_features: int,
+           settings, tick=None) -> list[dict]:
+    """Fit every candidate, then pairs where the best single leaves a gap; the ranking.
+
+    1. Every candidate alone (``front.fit``).
+    2. The leading single continued from its own fit (``front.continue_fit``), whether
+       or not pairs follow: a pair is warm-started from the lead's fit, and the lead
+       gets the same chance, so a partner is not credited with the lead's convergence
+       and the verdict does not depend on the pair trigger.
+    3. If the lead leaves more than ``pair_trigger`` excess per feature: the lead with
+       each of up to ``n_partners`` partners (``front.partners``, ``front.fit_pair``);
+       each member of the best pair is then refitted alone from it
+       (``front.refit_members``) and replaces its single fit where it does better.
+    """
+    tick = tick or (lambda msg: None)
+    singles = _parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
+                        "effect candidates")
+    tick("single candidates")
+    ranked = rank(singles, E0, cmp0)
+    if not ranked:
+        return ranked
+    lead = ranked[0]["_fit"]
+    more = front.continue_fit(lead)
+    if more is not None:
+        if more.heldout_excess < lead.heldout_excess:
+            singles = [more if f.names == lead.names else f for f in singles]
+            lead = rank(singles, E0, cmp0)[0]["_fit"]
+        tick("lead continued")
+    pairs = []
+    if lead.heldout_excess / n_features > settings.pair_trigger:
+        others = [c for c in candidates if (c,) != lead.names]
+        partners = front.partners(lead, others, settings.n_partners)
+        pairs = _parallel(settings.n_jobs,
+                          [lambda p=p: front.fit_pair(lead, p) for p in partners], "pairs")
+        if pairs:
+            top = rank(pairs, E0, cmp0)[0]["_fit"]
+            for new in front.refit_members(top):
+                singles = [new if f.names == new.names
+                           and new.heldout_excess < f.heldout_excess else f for f in singles]
+        tick("pairs")
+    return rank(singles + pairs, E0, cmp0)
+
+
+def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:
+    """The document's verdict entries from :func:`decide`'s ``choice``: the verdict, the
+    shrink of the held-out gap (for ``unexplained``, what the best candidate removed),
+    and with a verdict its bootstrap band, the gap after and each region before and
+    after."""
+    if choice == "no-gap":
+        return {"verdict": "no-gap", "shrink": 0.0}
+    if choice is None:
+        return {"verdict": "unexplained",
+                "shrink": max(ranking[0]["_shrink"], 0.0) if ranking else 0.0}
+    names = choice["_names"]
+    cmp = choice["_cmp"]
+    return {"verdict": names[0] if len(names) == 1 else list(names),
+            "shrink": choice["_shrink"],
+            "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
+            "gap_after": {"heldout_excess": choice["_E"],
+                          "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))},
+            "regions_after": regions_after(where, cmp, cmp0)}
+
+
+def public_ranking(ranking: list) -> list[dict]:
+    """The ranking as it goes into the document (the core's own keys dropped)."""
+    return [{k: v for k, v in r.items() if not k.startswith("_")} for r in ranking]
