@@ -419,3 +419,22 @@ def test_a_partner_solved_in_closed_form_is_scored_without_a_local_run():
                       fixed=[{"station": "A-O1"}, None])
     assert np.isfinite(probe.cost) and probe.cost < cal0.cost  # the runout is solved
     assert set(probe.effect_params[1]["vectors"]) == set(channels)
+
+
+def test_each_discrete_setting_is_converged_and_offered_to_the_caller():
+    """A crack's stations are not chosen by a three-iteration short run: each station's
+    best short run is converged and, with ``each_discrete``, every one is returned (the
+    diagnosis chooses among them on the held-out speeds); without it the lowest
+    converged training cost is the calibration."""
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS
+
+    measured, _ = make_trial("crack", 5, speeds=SPEEDS[:4], n_samples=600)
+    model, meas, train, _ = _calibration_setup(measured)
+    cal0 = calibrate(model, meas, train, (), max_nfev=3)
+    kw = {"starts": [cal0.x], "max_nfev": 4, "n_probe": 4, "n_short": 1}
+    each = calibrate(model, meas, train, [EFFECTS["crack"]], each_discrete=True, **kw)
+    assert sorted(c.effect_params[0]["station"] for c in each) == sorted(EFFECTS["crack"].STATIONS)
+    assert all(np.isfinite(c.cost) and c.cost <= cal0.cost * 1.01 for c in each)
+    one = calibrate(model, meas, train, [EFFECTS["crack"]], **kw)
+    assert one.cost == pytest.approx(min(c.cost for c in each))

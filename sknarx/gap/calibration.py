@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -27,6 +28,8 @@ from .features import record_features, stack_features
 from .gapmap import compare, fast_residual, gap_statistic
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
+
+logger = logging.getLogger(__name__)
 
 #: name -> (lower, upper, scale, start)
 NUISANCE = {
@@ -237,22 +240,28 @@ _ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nons
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
-              fixed=None) -> Calibration:
+              fixed=None, each_discrete=False):
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
     seeds the local least-squares run. With effects, ``n_probe`` settings of the
-    effect parameters from a scrambled Sobol sequence are scored first and the best
-    ``n_short`` best of them and the start get short local runs, and the best of
-    those is run to convergence: the 2x phase of a crack, say, is periodic in its angle,
-    and the cheapest probe, like local search alone, often sits in the wrong basin.
+    effect parameters from a scrambled Sobol sequence are scored first and the
+    ``n_short`` best of them get short local runs, and the best of those is run to
+    convergence: the 2x phase of a crack, say, is periodic in its angle, and the
+    cheapest probe, like local search alone, often sits in the wrong basin.
     ``probe_from`` (index into the search vector) restricts the probes to the
     trailing parameters -- a pair warm-started from its leading effect's fit probes
     only the partner. ``max_nfev=0`` returns the best probe without a local run.
     Discrete settings of an effect (``discrete``, e.g. a crack's station) are probed
     in every combination with the same Sobol points, and the local runs keep the
     combination of the probe they start from; ``fixed`` (one dict or None per class)
-    holds some of them (a pair keeps its leading effect's station). Each local run and
+    holds some of them (a pair keeps its leading effect's station); the best short run
+    of each combination runs to convergence. Returns the calibration of the lowest
+    converged cost or, with ``each_discrete``, a list of each combination's: the
+    training cost barely tells stations apart where the held-out speeds do (own crack
+    at O2-B, 19 speeds: converged costs 418 at O2-B and 423 at A-O1, held-out shrink
+    0.69 and 0.16), so the caller chooses among them as among candidates. Each local
+    run and
     each discrete setting's probes continue the settled runs of their start when the
     model allows it (see :meth:`SweepModel.warmed`) instead of settling every
     evaluation from rest.
@@ -335,14 +344,16 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         x0s = [(x, combo) for combo in combos
                for _, x, _ in [p for p in probes if p[2] is combo][:n_short]]
         if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)
-            return finish(probes[0][1], {}, probes[0][0], False, probes[0][2])
+            cal = finish(probes[0][1], {}, probes[0][0], False, probes[0][2])
+            return [cal] if each_discrete else cal
     elif len(combos) > 1:  # no probes: each discrete setting scored at the start
         x0 = x0s[0][0]
         x0s = [min(((x0, c) for c in combos),
                    key=lambda xc: float(np.sum(residual(*xc) ** 2)))]
     if max_nfev == 0:  # nothing to probe (e.g. a partner solved in closed form): the start
         x0, combo = x0s[0]
-        return finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
+        cal = finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
+        return [cal] if each_discrete else cal
 
     def local(x0, nfev, combo):
         return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
@@ -351,14 +362,22 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
 
     if len(x0s) > 1:
         # the cheapest probe is often in the wrong basin of a periodic parameter: a short
-        # run from each of the leading starts, then the best of them runs to the end
+        # run from each of the leading starts, then the best of them runs to the end --
+        # the best of each discrete setting: three iterations do not tell the stations
+        # apart
         short = [(local(x0, max(3, max_nfev // 4), combo), combo) for x0, combo in x0s]
-        res, combo = min(short, key=lambda rc: rc[0].cost)
-        x0s = [(res.x, combo)]
-    x0, combo = x0s[0]
-    best = local(x0, max_nfev, combo)
-    return finish(best.x, _std(best, log, names), float(2 * best.cost), bool(best.success),
-                  combo)
+        x0s = []
+        for c in combos:
+            runs = [r for r, rc in short if rc is c]
+            if runs:
+                x0s.append((min(runs, key=lambda r: r.cost).x, c))
+    finals = [(local(x0, max_nfev, combo), combo) for x0, combo in x0s]
+    if len(finals) > 1:
+        logger.debug("discrete settings, converged cost: %s",
+                     ", ".join(f"{c}: {2 * r.cost:.4g}" for r, c in finals))
+    cals = [finish(r.x, _std(r, log, names), float(2 * r.cost), bool(r.success), c)
+            for r, c in finals]
+    return cals if each_discrete else min(cals, key=lambda cal: cal.cost)
 
 
 def _projection(classes, keys, order_k, Mc, se_m):

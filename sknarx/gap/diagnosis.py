@@ -166,15 +166,24 @@ class _SweepFrontEnd(FrontEnd):
         return calibrate(self.model, self.meas, self.train, [EFFECTS[n] for n in names],
                          **{"max_nfev": self.settings.max_nfev, **kw})
 
+    def _best(self, names, **kw):
+        # each discrete setting (a crack's station, a rub's disk) converged on the
+        # training speeds and chosen, as candidates are, on the held-out ones: the
+        # training cost barely tells stations apart (see calibrate)
+        fits = [self._result(names, cal)
+                for cal in self._calibrate(names, each_discrete=True, **kw)]
+        return min(fits, key=lambda f: (f.heldout_excess, f.state.cost))
+
     def fit(self, names):
-        cal = self._calibrate(names, starts=[self.nuis_start], n_probe=self.settings.n_probe)
-        return self._result(names, cal)
+        return self._best(names, starts=[self.nuis_start], n_probe=self.settings.n_probe)
 
     def continue_fit(self, fit):
-        # pairs start from the lead's first fit, whatever its continuation does
+        # pairs start from the lead's first fit, whatever its continuation does; the
+        # continuation keeps the fit's discrete settings
         self._lead_x = fit.state.x
+        fixed = [discrete_settings(fit.state, i, EFFECTS[n]) for i, n in enumerate(fit.names)]
         return self._result(fit.names, self._calibrate(fit.names, starts=[fit.state.x],
-                                                       n_probe=0))
+                                                       n_probe=0, fixed=fixed))
 
     def _pair_kw(self, lead):
         # only the partner is probed; the lead keeps its discrete settings (a crack's
@@ -193,8 +202,7 @@ class _SweepFrontEnd(FrontEnd):
         return [p for _, p in sorted(scores)[:k]]
 
     def fit_pair(self, lead, partner):
-        names = (lead.names[0], partner)
-        return self._result(names, self._calibrate(names, **self._pair_kw(lead)))
+        return self._best((lead.names[0], partner), **self._pair_kw(lead))
 
     def refit_members(self, pair):
         # a pair must not take the credit for one member's convergence either (a rub
