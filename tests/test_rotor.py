@@ -298,3 +298,45 @@ def test_run_up_input_is_checked():
         runup_order_response(_small_beam(), 3000.0, 600.0, 100.0, probe=0.25)
     with pytest.raises(ValueError, match="rate_rpm_s"):
         runup_order_response(_small_beam(), 600.0, 3000.0, 0.0, probe=0.25)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(kh=st.floats(1e6, 1e9), kp=st.floats(1e6, 1e9), mass=st.floats(0.0, 40.0),
+       damping=st.floats(0.0, 2e4), omega=st.floats(10.0, 400.0),
+       phase=st.floats(-np.pi, np.pi))
+def test_the_pedestal_is_in_series_with_the_contact(kh, kp, mass, damping, omega, phase):
+    """The anisotropy's force on a journal moving harmonically at the running speed is
+    ``D x`` with ``D = kh^2 / (kh + kp - m w^2 + i c w)``: added to the contact's
+    ``-kh x`` it leaves the series stiffness ``kh s / (kh + s)`` -- a softer support, never
+    a stiffer one (the kernel once added ``-D x`` and stiffened it)."""
+    from types import SimpleNamespace
+
+    eff = R.SupportAnisotropy(kx=kp, ky=kp, mass=mass, damping=damping)
+    ctx = SimpleNamespace(bearing_stiffness=(np.eye(2) * kh, np.eye(2) * kh),
+                          q_static=np.zeros(12))
+    kernel, p = eff.force_kernel(ctx)
+    X = 1e-5 * np.exp(1j * phase)
+    q, v, out = np.zeros(12), np.zeros(12), np.zeros(12)
+    q[0], v[0] = X.real, (1j * omega * X).real
+    kernel(0.0, 0.0, omega, 0.0, q, v, p, out)
+    s = kp - mass * omega**2 + 1j * damping * omega
+    D = kh**2 / (kh + s)
+    assert out[0] == pytest.approx((D * X).real, rel=1e-9, abs=1e-12 * abs(D * X))
+    if mass == 0.0 and damping == 0.0:
+        assert 0.0 < kh - out[0] / X.real <= kh  # the series spring is softer
+    assert out[1] == 0.0 or abs(out[1]) < 1e-300  # y at rest: no force
+
+
+def test_a_soft_pedestal_lets_the_journal_move_more():
+    """Simulated 1x at the journals: a soft pedestal in series with the contact lets
+    them move more (on the paper rotor the shaft segments, 0.8 MN/m, are far softer
+    than the contacts, ~1e8 N/m: the disks barely notice; the journals do)."""
+    def journal_1x(effects, w=200.0):
+        tab = R.RotorBearingSimulator(effects=effects).simulate(w, fs=1000.0, n_samples=800,
+                                                                settle=1.5)
+        phi = w * np.arange(len(tab)) / 1000.0
+        return np.array([order_components(tab[c].to_numpy(), phi, (1,))[0][0]
+                         for c in ("xA", "yA")])
+
+    stiff, soft = journal_1x([]), journal_1x([R.SupportAnisotropy(kx=2e6, ky=2e6)])
+    assert np.all(soft > 1.2 * stiff)

@@ -435,40 +435,63 @@ class JointLooseness(Effect):
 
 @njit(nogil=True, cache=True)
 def _support_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
-    # linear series compliance of the pedestals, about the static equilibrium
+    # each pedestal in series with its contact, about the static equilibrium: per
+    # bearing and direction the contact's tangent stiffness kh, the pedestal's static
+    # stiffness kp, and (shared by both directions) its mass m and damping c. At the
+    # running speed w the pedestal's dynamic stiffness is s = kp - m w^2 + i c w and the
+    # series stiffness kh s / (kh + s) = kh - D with D = kh^2 / (kh + s): the force
+    # D x on the journal takes D's real part as a softening stiffness and its imaginary
+    # part, over w, as a damping (exact for the synchronous response)
     for b in range(2):
-        ix, iy = int(p[6 * b]), int(p[6 * b + 1])
-        out[ix] -= p[6 * b + 2] * (q[ix] - p[6 * b + 4])
-        out[iy] -= p[6 * b + 3] * (q[iy] - p[6 * b + 5])
+        o = 8 * b
+        m, c = p[o + 6], p[o + 7]
+        for d in range(2):
+            i = int(p[o + d])
+            kh, kp = p[o + 2 + 2 * d], p[o + 3 + 2 * d]
+            sr = kh + kp - m * omega * omega
+            si = c * omega
+            den = sr * sr + si * si
+            x = q[i] - p[16 + 2 * b + d]
+            out[i] += kh * kh * (sr * x - c * v[i]) / den
 
 
 @dataclass(repr=False)
 class SupportAnisotropy(Effect):
-    """Flexible, anisotropic foundation: pedestals of stiffness ``kx``, ``ky`` (N/m).
+    """Flexible, anisotropic foundation: pedestals of stiffness ``kx``, ``ky`` (N/m),
+    with the housing's ``mass`` (kg) and ``damping`` (N s/m), at both bearings.
 
     Each bearing sits on a pedestal in series with its Hertzian contact. With the
-    contact's tangent stiffness ``k_H`` (at the static equilibrium) the series
-    stiffness is ``k_H k_p / (k_H + k_p)``; the effect adds the difference,
-    ``-(k_H^2 / (k_H + k_p))`` per direction, as a linear force about the static
-    equilibrium (pedestal mass neglected). Signature: the critical speed splits
-    into a horizontal and a vertical one; elliptical orbits, x and y 1x amplitudes
-    peak at different speeds.
+    contact's tangent stiffness ``k_H`` (at the static equilibrium) and the pedestal's
+    dynamic stiffness at the running speed, ``s = k_p - m Omega^2 + i c Omega``, the
+    series stiffness is ``k_H s / (k_H + s)``; the effect adds the difference,
+    ``-k_H^2 / (k_H + s)`` per direction, as a linear force about the static
+    equilibrium: a softer support, and through the housing's mass and damping a
+    support resonance of its own (at ``sqrt((k_H + k_p) / m)``) that lowers and damps
+    it further as the speed rises. Exact for the synchronous response; harmonics see the
+    synchronous value. With ``mass = damping = 0`` the massless series spring.
+    Signature: the critical speed splits into a horizontal and a vertical one;
+    elliptical orbits, x and y 1x amplitudes peak at different speeds.
     """
 
     kx: float = 5e6
     ky: float = 2e7
+    mass: float = 0.0
+    damping: float = 0.0
     name = "anisotropy"
-    bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log")}
-    units = {"kx": "N/m", "ky": "N/m"}
+    bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log"), "mass": (0.0, 40.0, "lin"),
+              "damping": (0.0, 2e4, "lin")}
+    #: a calibration starts from the massless, undamped pedestal
+    start = {"mass": 0.0, "damping": 0.0}
+    units = {"kx": "N/m", "ky": "N/m", "mass": "kg", "damping": "N s/m"}
     signature = "split critical speed: x and y 1x peaks at different speeds, elliptic orbits"
 
     def force_kernel(self, context):
-        vals = []
+        vals, static = [], []
         for (ix, iy), KH in zip(((0, 1), (10, 11)), context.bearing_stiffness, strict=True):
             kh = np.diag(KH)
-            dk = [kh[0] ** 2 / (kh[0] + self.kx), kh[1] ** 2 / (kh[1] + self.ky)]
-            vals += [ix, iy, dk[0], dk[1], context.q_static[ix], context.q_static[iy]]
-        return _support_kernel, np.array(vals, dtype=float)
+            vals += [ix, iy, kh[0], self.kx, kh[1], self.ky, self.mass, self.damping]
+            static += [context.q_static[ix], context.q_static[iy]]
+        return _support_kernel, np.array(vals + static, dtype=float)
 
 
 def compose_force_kernels(kernels):
