@@ -3,7 +3,8 @@ with nominal updating, on sweeps from each plant family.
 
 Run: ``python benchmarks/bench_gap_cost.py [--families own,second,ross] [--repeat N]
 [--kinds crack,none] [--peer-kinds crack] [--peer-families own]`` (writes
-``benchmarks/results/bench_gap_cost.json``). Target (issue #13): at most 3 minutes on
+``benchmarks/results/bench_gap_cost.json``, with each run's phases: updating, nuisances,
+single candidates, the lead continued, pairs). Target (issue #13): at most 3 minutes on
 this 2-core machine. The peer, run side by side on the ``--peer-kinds`` sweeps of the
 ``--peer-families``, is the same diagnosis with every
 calibration evaluation settled from rest (``warm_lead_s=None``, the code before the
@@ -58,14 +59,23 @@ def main():
     cold = DiagnosisSettings(warm_lead_s=None)
 
     def timed(measured, settings):
-        times, d = [], None
+        """Median-ready wall times of ``repeat`` runs, and the last run's phases (s): where
+        the time goes (updating, nuisances, single candidates, the lead continued, pairs)."""
+        times, d, phases = [], None, {}
         for _ in range(args.repeat):
             t = time.perf_counter()
+            marks = []
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                d = diagnose(measured, settings=settings)
+                d = diagnose(measured, settings=settings,
+                             progress=lambda msg, m=marks: m.append((msg, time.perf_counter())))
             times.append(time.perf_counter() - t)
-        return d, times
+            last = t
+            phases = {}
+            for msg, at in marks:
+                phases[msg] = at - last
+                last = at
+        return d, times, phases
 
     for fam in args.families.split(","):
         for i, k in enumerate(args.kinds.split(",")):
@@ -78,13 +88,14 @@ def main():
                 print(f"{fam} {k}: the plant failed ({exc}); skipped", flush=True)
                 results.append({"family": fam, "truth": k, "skipped": str(exc)})
                 continue
-            d, times = timed(measured, None)
+            d, times, phases = timed(measured, None)
             dt = float(np.median(times))
             row = {"family": fam, "truth": truth["kind"], "verdict": d["verdict"],
-                   "seconds": dt, "runs_s": times, "shrink": d["shrink"]}
+                   "seconds": dt, "runs_s": times, "shrink": d["shrink"],
+                   "phases_s": phases}
             peer = "-"
             if k in peer_kinds and fam in args.peer_families.split(","):
-                dp, ptimes = timed(measured, cold)
+                dp, ptimes, _ = timed(measured, cold)
                 row.update(peer_seconds=float(np.median(ptimes)), peer_runs_s=ptimes,
                            peer_verdict=dp["verdict"], peer_shrink=dp["shrink"],
                            speedup=float(np.median(ptimes)) / dt)
@@ -94,6 +105,8 @@ def main():
             rows.append([fam, str(truth["kind"]), str(d["verdict"]), f"{dt:.0f} s",
                          f"{min(times):.0f}-{max(times):.0f} s", peer, "<= 180 s"])
             print(rows[-1], flush=True)
+            print("  phases: " + ", ".join(f"{k} {v:.0f} s" for k, v in phases.items()),
+                  flush=True)
     table(rows, ["family", "withheld", "verdict", "19-speed diagnosis (median)", "range",
                  "peer: settled from rest (verdict), ratio", "target"])
     write_json("bench_gap_cost", {"speeds": len(SPEEDS_19), "channels": list(families.CHANNELS),
