@@ -57,7 +57,7 @@ from plants.families import (  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
-from sknarx.gap.diagnosis import decide  # noqa: E402
+from sknarx.gap.core import decide  # noqa: E402
 from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
@@ -167,15 +167,14 @@ def names_of(effect):
 
 
 def verdict(rec, s):
-    ranking = [{**r, "_names": names_of(r["effect"]), "_shrink": r["shrink"], "_E": r["E"]}
-               for r in rec["ranking"]]
+    ranking = [{**r, "heldout_gap_after": r["E"]} for r in rec["ranking"]]
     choice = decide(rec["e0"], ranking, s, rec["n_features"])
     if choice == "no-gap":
         return "no-gap", 0.0
     if choice is None:
         return "unexplained", 0.0
-    names = choice["_names"]
-    return (names[0] if len(names) == 1 else sorted(names)), choice["_shrink"]
+    names = names_of(choice["effect"])
+    return (names[0] if len(names) == 1 else sorted(names)), choice["shrink"]
 
 
 def truth_label(rec):

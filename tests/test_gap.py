@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -170,35 +171,41 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
 
 
 def _entry(names, E, shrink, log_shrink):
-    return {"_names": tuple(names), "_E": E, "_shrink": shrink, "log_shrink": log_shrink,
-            "score": E + 2 * len(names)}
+    return {"effect": names[0] if len(names) == 1 else list(names), "heldout_gap_after": E,
+            "shrink": shrink, "log_shrink": log_shrink, "score": E + 2 * len(names)}
 
 
 def test_verdict_needs_breadth_as_well_as_shrink():
     from sknarx.gap import DiagnosisSettings
-    from sknarx.gap.diagnosis import decide
+    from sknarx.gap.core import decide
 
     s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5)
     broad = _entry(["crack"], 10.0, 0.95, 0.9)
     narrow = _entry(["clearance"], 10.0, 0.95, -0.3)  # matches the big features only
-    assert decide(5.0, [broad], s, 100)["_names"] == ("crack",)
+    assert decide(5.0, [broad], s, 100)["effect"] == "crack"
     assert decide(5.0, [narrow], s, 100) is None
     assert decide(0.4, [broad], s, 100) == "no-gap"
 
 
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():
     from sknarx.gap import DiagnosisSettings
-    from sknarx.gap.diagnosis import decide
+    from sknarx.gap.core import decide
 
     s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5,
                           pair_trigger=1.0, pair_gain=0.5)
     single = _entry(["runout"], 300.0, 0.98, 0.6)  # leaves 3 per feature
     pair = _entry(["runout", "crack"], 20.0, 0.999, 0.95)
-    assert decide(50.0, [single, pair], s, 100)["_names"] == ("runout", "crack")
+    assert decide(50.0, [single, pair], s, 100)["effect"] == ["runout", "crack"]
     weak = _entry(["runout", "crack"], 200.0, 0.985, 0.7)  # removes only a third of it
-    assert decide(50.0, [single, weak], s, 100)["_names"] == ("runout",)
+    assert decide(50.0, [single, weak], s, 100)["effect"] == "runout"
     small = _entry(["runout"], 50.0, 0.999, 0.9)  # leaves 0.5 per feature: no pair
-    assert decide(50.0, [small, pair], s, 100)["_names"] == ("runout",)
+    assert decide(50.0, [small, pair], s, 100)["effect"] == "runout"
+    # with a stated margin (the order-domain rule) the pair must also score that much
+    # lower: 20 + 4 against 300 + 2 passes 10, not 300
+    assert decide(50.0, [single, pair], replace(s, pair_margin=10.0),
+                  100)["effect"] == ["runout", "crack"]
+    strict = replace(s, pair_margin=300.0)
+    assert decide(50.0, [single, pair], strict, 100)["effect"] == "runout"
 
 
 @pytest.mark.slow

@@ -258,13 +258,11 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     holds some of them (a pair keeps its leading effect's station); the best short run
     of each combination runs to convergence. Returns the calibration of the lowest
     converged cost or, with ``each_discrete``, a list of each combination's: the
-    training cost barely tells stations apart where the held-out speeds do (own crack
-    at O2-B, 19 speeds: converged costs 418 at O2-B and 423 at A-O1, held-out shrink
-    0.69 and 0.16), so the caller chooses among them as among candidates. Each local
-    run and
-    each discrete setting's probes continue the settled runs of their start when the
-    model allows it (see :meth:`SweepModel.warmed`) instead of settling every
-    evaluation from rest.
+    training cost can barely tell stations apart where held-out speeds can (measured
+    in ``docs/gap.md``, the crack row), so the caller may choose among them as it
+    chooses among candidates. Each local run and each discrete setting's probes
+    continue the settled runs of their start when the model allows it (see
+    :meth:`SweepModel.warmed`) instead of settling every evaluation from rest.
     """
     from scipy.stats import qmc
 

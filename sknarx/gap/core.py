@@ -33,8 +33,8 @@ from joblib import Parallel, delayed
 from .._progress import progress_bar
 
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
-           "decide", "log_shrink", "preferred", "public_ranking", "rank", "regions_after",
-           "search", "shrink", "table_evidence"]
+           "decide", "effect_names", "log_shrink", "preferred", "public_ranking", "rank",
+           "regions_after", "run_parallel", "search", "shrink", "table_evidence"]
 
 logger = logging.getLogger(__name__)
 
@@ -126,9 +126,16 @@ class CandidateFit:
     state: Any = None
 
 
+def effect_names(entry: dict) -> tuple:
+    """The effect names of a ranking entry (one, or the two of a pair)."""
+    e = entry["effect"]
+    return (e,) if isinstance(e, str) else tuple(e)
+
+
 def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
     """Ranking entries of fitted candidates, best first: held-out excess after plus two
-    per added parameter. Keys starting with ``_`` are for the core, not the document."""
+    per added parameter. ``_cmp`` and ``_fit`` (the held-out table and the fit) are for
+    the core and the reports, not the document."""
     out = []
     for f in fits:
         E = f.heldout_excess
@@ -137,9 +144,7 @@ def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
             "params": f.params, "params_std": f.params_std,
             "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink(E0, E),
             "log_shrink": log_shrink(cmp0, f.cmp), "score": E + 2.0 * f.n_params,
-            **f.details,
-            "_names": tuple(f.names), "_shrink": shrink(E0, E), "_E": E, "_cmp": f.cmp,
-            "_fit": f,
+            **f.details, "_cmp": f.cmp, "_fit": f,
         })
     out.sort(key=lambda r: r["score"])
     return out
@@ -150,15 +155,16 @@ def preferred(ranking: list, settings, n_features: int):
     leaves more than ``pair_trigger`` excess per feature, the pair removes
     ``pair_gain`` of what the single leaves and (with ``pair_margin`` set) scores at
     least that much below it. None without any single."""
-    singles = [r for r in ranking if len(r["_names"]) == 1]
-    pairs = [r for r in ranking if len(r["_names"]) == 2]
+    singles = [r for r in ranking if len(effect_names(r)) == 1]
+    pairs = [r for r in ranking if len(effect_names(r)) == 2]
     if not singles:
         return None
     best = min(singles, key=lambda r: r["score"])
-    if pairs and best["_E"] / n_features > settings.pair_trigger:
+    left = best["heldout_gap_after"]
+    if pairs and left / n_features > settings.pair_trigger:
         pb = min(pairs, key=lambda r: r["score"])
-        margin = getattr(settings, "pair_margin", None)
-        if (pb["_E"] <= (1.0 - settings.pair_gain) * best["_E"]
+        margin = settings.pair_margin
+        if (pb["heldout_gap_after"] <= (1.0 - settings.pair_gain) * left
                 and (margin is None or best["score"] - pb["score"] >= margin)):
             return pb
     return best
@@ -182,7 +188,7 @@ def decide(e0: float, ranking: list, settings, n_features: int):
     choice = preferred(ranking, settings, n_features)
     if choice is None:
         return None
-    ok = (choice["_shrink"] >= settings.min_shrink
+    ok = (choice["shrink"] >= settings.min_shrink
           and choice["log_shrink"] >= settings.min_log_shrink)
     return choice if ok else None
 
@@ -215,7 +221,7 @@ class FrontEnd:
         return []
 
 
-def _parallel(n_jobs, calls, desc):
+def run_parallel(n_jobs, calls, desc):
     """Run ``calls`` (zero-argument callables) on threads with a progress bar; results
     in submission order."""
     gen = Parallel(n_jobs=n_jobs, prefer="threads", return_as="generator")(
@@ -238,7 +244,7 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
        (``front.refit_members``) and replaces its single fit where it does better.
     """
     tick = tick or (lambda msg: None)
-    singles = _parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
+    singles = run_parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
                         "effect candidates")
     tick("single candidates")
     ranked = rank(singles, E0, cmp0)
@@ -255,7 +261,7 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
     if lead.heldout_excess / n_features > settings.pair_trigger:
         others = [c for c in candidates if (c,) != lead.names]
         partners = front.partners(lead, others, settings.n_partners)
-        pairs = _parallel(settings.n_jobs,
+        pairs = run_parallel(settings.n_jobs,
                           [lambda p=p: front.fit_pair(lead, p) for p in partners], "pairs")
         if pairs:
             top = rank(pairs, E0, cmp0)[0]["_fit"]
@@ -275,13 +281,11 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -
         return {"verdict": "no-gap", "shrink": 0.0}
     if choice is None:
         return {"verdict": "unexplained",
-                "shrink": max(ranking[0]["_shrink"], 0.0) if ranking else 0.0}
-    names = choice["_names"]
+                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0}
     cmp = choice["_cmp"]
-    return {"verdict": names[0] if len(names) == 1 else list(names),
-            "shrink": choice["_shrink"],
+    return {"verdict": choice["effect"], "shrink": choice["shrink"],
             "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
-            "gap_after": {"heldout_excess": choice["_E"],
+            "gap_after": {"heldout_excess": choice["heldout_gap_after"],
                           "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))},
             "regions_after": regions_after(where, cmp, cmp0)}
 

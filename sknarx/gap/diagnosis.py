@@ -33,7 +33,6 @@ from dataclasses import asdict
 import numpy as np
 import pandas as pd
 
-from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, heldout_gap
 from .core import (
@@ -43,6 +42,7 @@ from .core import (
     conclude,
     decide,
     public_ranking,
+    run_parallel,
     search,
     table_evidence,
 )
@@ -52,7 +52,7 @@ from .result import GapDiagnosis
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
 
-__all__ = ["LIBRARY", "DiagnosisSettings", "diagnose", "decide"]
+__all__ = ["LIBRARY", "DiagnosisSettings", "diagnose"]
 
 logger = logging.getLogger(__name__)
 
@@ -195,11 +195,11 @@ class _SweepFrontEnd(FrontEnd):
     def partners(self, lead, others, k):
         # an effect masked by a dominant one fits badly on its own: score each
         # candidate by probing it on top of the leading fit instead
-        scores = [(self._calibrate((lead.names[0], p), max_nfev=0,
-                                   **self._pair_kw(lead)).cost, p)
-                  for p in progress_bar(others, desc=f"partners of {lead.names[0]}",
-                                        unit="probe")]
-        return [p for _, p in sorted(scores)[:k]]
+        costs = run_parallel(self.settings.n_jobs, [
+            lambda p=p: self._calibrate((lead.names[0], p), max_nfev=0,
+                                        **self._pair_kw(lead)).cost for p in others],
+            f"partners of {lead.names[0]}")
+        return [p for _, p in sorted(zip(costs, others, strict=True))[:k]]
 
     def fit_pair(self, lead, partner):
         return self._best((lead.names[0], partner), **self._pair_kw(lead))

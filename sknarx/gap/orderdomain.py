@@ -363,7 +363,9 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
               "corrected": s_best, "corrected_label": label, "quasi_steady": s_quasi,
               "z2": {"calibrated nominal": z2_cal, f"corrected ({label})": z2_best},
               "measurement": meas_cfg}
-    return GapDiagnosis(doc, front_end="order-domain", base=rotor, curves=curves,
+    # the rotor the effects were fitted on: the nominal with its calibrated bearings
+    base = rotor.with_bearings(kxx=kcs_cal[0], kyy=kcs_cal[0], cxx=kcs_cal[2], cyy=kcs_cal[2])
+    return GapDiagnosis(doc, front_end="order-domain", base=base, curves=curves,
                         tables={"before": cmp0, "after": best["_cmp"]})
 
 

@@ -31,8 +31,9 @@ class GapDiagnosis(Mapping):
         Feature-by-feature comparison tables (``before``, ``all``, ``after``): speed in
         rad/s, gap in m, ``z2`` and ``excess`` dimensionless.
     base : object, optional
-        The nominal rotor the effects were fitted on (the updated one when the nominal
-        model was updated).
+        The nominal rotor the effects were fitted on: the updated
+        :class:`~sknarx.rotor.RotorParameters` of a time-series diagnosis, the linear
+        rotor with its calibrated bearings of an order-domain one.
     curves : dict
         Front-end arrays for figures (the order-domain front end: the binned record and
         the nominal, calibrated and corrected 1x curves, in m).
