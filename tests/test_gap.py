@@ -445,3 +445,44 @@ def test_each_discrete_setting_is_converged_and_offered_to_the_caller():
     assert all(np.isfinite(c.cost) and c.cost <= cal0.cost * 1.01 for c in each)
     one = calibrate(model, meas, train, [EFFECTS["crack"]], **kw)
     assert one.cost == pytest.approx(min(c.cost for c in each))
+
+
+@given(st.integers(1, 5), st.integers(0, 2**31 - 1))
+def test_the_secant_jacobian_of_an_affine_residual_is_exact_at_every_step(refresh, seed):
+    """Broyden's update keeps an exact Jacobian exact on an affine residual, whatever the
+    steps between differenced ones; the differenced one matches scipy's ``'2-point'``."""
+    from scipy.optimize._numdiff import approx_derivative
+
+    from sknarx.gap.jacobian import SecantJacobian
+
+    rng = np.random.default_rng(seed)
+    A, b = rng.normal(size=(7, 4)), rng.normal(size=7)
+    lo, hi = -np.ones(4), np.ones(4)
+    jac = SecantJacobian(lambda x: A @ x + b, lo, hi, rel_step=1e-6, refresh=refresh)
+    x = rng.uniform(-0.9, 0.9, 4)
+    np.testing.assert_allclose(jac(x), approx_derivative(lambda z: A @ z + b, x,
+                                                        rel_step=1e-6, bounds=(lo, hi)),
+                               rtol=1e-6, atol=1e-8)
+    for _ in range(6):
+        x = np.clip(x + rng.normal(scale=0.3, size=4), lo, hi)
+        jac.residual(x)
+        np.testing.assert_allclose(jac(x), A, rtol=1e-5, atol=1e-6)
+    assert jac.n_differenced == -(-7 // refresh)  # the first call and every refresh-th
+
+
+def test_a_secant_jacobian_least_squares_reaches_the_differenced_one_s_minimum():
+    from scipy.optimize import least_squares
+
+    from sknarx.gap.jacobian import SecantJacobian
+
+    def rosenbrock(x):
+        return np.array([10 * (x[1] - x[0] ** 2), 1 - x[0], 0.3 * (x[2] - x[0])])
+
+    lo, hi = np.full(3, -2.0), np.full(3, 2.0)
+    ref = least_squares(rosenbrock, [-1.2, 1.0, 0.0], bounds=(lo, hi))
+    jac = SecantJacobian(rosenbrock, lo, hi, refresh=4)
+    sec = least_squares(jac.residual, [-1.2, 1.0, 0.0], jac=jac, bounds=(lo, hi))
+    np.testing.assert_allclose(sec.x, ref.x, atol=1e-5)
+    assert jac.n_differenced < jac._calls  # the secant steps did some of the work
+    with pytest.raises(ValueError, match="refresh"):
+        SecantJacobian(rosenbrock, lo, hi, refresh=0)

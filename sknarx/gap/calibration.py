@@ -26,6 +26,7 @@ from scipy.optimize import least_squares
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
 from .features import record_features, stack_features
 from .gapmap import compare, fast_residual, gap_statistic
+from .jacobian import SecantJacobian
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
 
@@ -218,6 +219,11 @@ def discrete_settings(cal, i, cls) -> dict:
     return {k: cal.effect_params[i][k] for k in getattr(cls, "discrete", {})}
 
 
+def _probe_key(classes, combo, x):
+    return (tuple(cls.name for cls in classes),
+            tuple(tuple(sorted(c.items())) for c in combo), np.asarray(x).tobytes())
+
+
 def _measured_arrays(meas_feats, keys):
     m = meas_feats.set_index(["speed", "window", "channel", "feature"]).reindex(
         pd.MultiIndex.from_tuples(keys))
@@ -240,7 +246,7 @@ _ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nons
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
-              fixed=None, each_discrete=False):
+              fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None):
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
@@ -263,6 +269,14 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     chooses among candidates. Each local run and each discrete setting's probes
     continue the settled runs of their start when the model allows it (see
     :meth:`SweepModel.warmed`) instead of settling every evaluation from rest.
+    ``jacobian_refresh`` (steps) makes the short runs' Jacobian a secant one, by forward
+    differences only every so many steps and after a rejected step (see
+    :class:`~sknarx.gap.jacobian.SecantJacobian`): they only rank basins; the converged
+    runs difference theirs at every step (a secant Jacobian left the held-out choice of
+    a crack's station to chance, see ``docs/gap.md``). None: forward differences
+    throughout. ``probe_cache`` (a dict the caller keeps across calls on one model and
+    one ``meas_feats``) remembers each probe's cost: probing the same points from the
+    same start again (a pair's partner, then the pair) costs nothing.
     """
     from scipy.stats import qmc
 
@@ -329,12 +343,21 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         unit = qmc.Sobol(len(lo) - j0, scramble=True, seed=seed).random(n_probe)
         probes = []
         for combo in combos:
-            sweep = warmed(base, combo)
-            for u in unit:
-                x = base.copy()
-                x[j] = lo[j] + u * (hi[j] - lo[j])
-                probes.append((float(np.sum(residual(x, combo, sweep) ** 2)), x, combo))
-            probes.append((float(np.sum(residual(base, combo, sweep) ** 2)), base, combo))
+            points = [*(np.concatenate([base[:j0], lo[j] + u * (hi[j] - lo[j])])
+                        for u in unit), base]
+            # the same points from the same start (a partner's probes on top of a lead,
+            # then the pair's own) cost nothing the second time
+            keys = [_probe_key(classes, combo, x) for x in points]
+            if probe_cache is None or any(k not in probe_cache for k in keys):
+                sweep = warmed(base, combo)
+                for k, x in zip(keys, points, strict=True):
+                    cost = float(np.sum(residual(x, combo, sweep) ** 2))
+                    if probe_cache is not None:
+                        probe_cache[k] = cost
+                    probes.append((cost, x, combo))
+            else:
+                probes += [(probe_cache[k], x, combo) for k, x in zip(keys, points,
+                                                                     strict=True)]
         probes.sort(key=lambda p: p[0])
         # each discrete setting gets its own leading starts: a wrong station's probes
         # can all undercut the right one's before any local run (crack trial 5068: the
@@ -353,22 +376,32 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         cal = finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
         return [cal] if each_discrete else cal
 
-    def local(x0, nfev, combo):
-        return least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale=hi - lo,
-                             diff_step=diff_step, max_nfev=nfev,
-                             args=(combo, warmed(x0, combo)))
+    def local(x0, nfev, combo, refresh=None):
+        sweep = warmed(x0, combo)
+        if refresh is None:
+            return least_squares(residual, x0, bounds=(lo, hi), method="trf",
+                                 x_scale=hi - lo, diff_step=diff_step, max_nfev=nfev,
+                                 args=(combo, sweep))
+        jac = SecantJacobian(lambda x: residual(x, combo, sweep), lo, hi, diff_step, refresh)
+        return least_squares(jac.residual, x0, jac=jac, bounds=(lo, hi), method="trf",
+                             x_scale=hi - lo, max_nfev=nfev)
 
     if len(x0s) > 1:
         # the cheapest probe is often in the wrong basin of a periodic parameter: a short
         # run from each of the leading starts, then the best of them runs to the end --
         # the best of each discrete setting: three iterations do not tell the stations
         # apart
-        short = [(local(x0, max(3, max_nfev // 4), combo), combo) for x0, combo in x0s]
+        short = [(local(x0, max(3, max_nfev // 4), combo, jacobian_refresh), combo)
+                 for x0, combo in x0s]
         x0s = []
         for c in combos:
             runs = [r for r, rc in short if rc is c]
             if runs:
                 x0s.append((min(runs, key=lambda r: r.cost).x, c))
+        if len(x0s) > 1:
+            logger.debug("discrete settings, best short-run cost: %s", ", ".join(
+                f"{c}: {2 * min(r.cost for r, rc in short if rc is c):.4g}"
+                for _, c in x0s))
     finals = [(local(x0, max_nfev, combo), combo) for x0, combo in x0s]
     if len(finals) > 1:
         logger.debug("discrete settings, converged cost: %s",

@@ -143,6 +143,9 @@ class _SweepFrontEnd(FrontEnd):
         self.model, self.meas, self.train, self.held = model, meas, train, held
         self.cmp0, self.settings, self.nuis_start = cmp0, settings, nuis_start
         self._lead_x = None
+        # each probe's cost by effects, discrete settings and point: a pair's probes
+        # are its partner's probes on top of the lead, scored once
+        self._probe_costs = {}
 
     def _result(self, names, cal):
         classes = [EFFECTS[n] for n in names]
@@ -164,7 +167,9 @@ class _SweepFrontEnd(FrontEnd):
 
     def _calibrate(self, names, **kw):
         return calibrate(self.model, self.meas, self.train, [EFFECTS[n] for n in names],
-                         **{"max_nfev": self.settings.max_nfev, **kw})
+                         **{"max_nfev": self.settings.max_nfev,
+                            "jacobian_refresh": self.settings.jacobian_refresh,
+                            "probe_cache": self._probe_costs, **kw})
 
     def _best(self, names, **kw):
         # each discrete setting (a crack's station, a rub's disk) converged on the
@@ -311,7 +316,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     dphi = float(np.angle(np.sum((m1.re.to_numpy() + 1j * m1.im.to_numpy())
                                  * np.conj(s1.re.to_numpy() + 1j * s1.im.to_numpy()))))
     start = np.array([1.0, dphi, 1.0, 1.0])
-    cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev)
+    cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev,
+                     jacobian_refresh=settings.jacobian_refresh)
     E0, cmp0 = heldout_gap(model, meas, held, cal0, ())
     _, cmp_all = heldout_gap(model, meas, speeds, cal0, ())
     tick("nuisance calibration")

@@ -14,7 +14,8 @@ __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
 
 #: the fields that change what a diagnosis computes (the others only read its results)
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
-                 "update_nominal", "update_max_nfev", "seed", "warm_lead_s", "n_probe")
+                 "update_nominal", "update_max_nfev", "seed", "warm_lead_s", "n_probe",
+                 "jacobian_refresh")
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,10 @@ class DiagnosisSettings:
     # model error and is reported as such
     update_nominal: bool = True
     update_max_nfev: int = 30
+    # a calibration's local runs difference their Jacobian every this many steps and
+    # update it by Broyden's secant rule in between (sknarx.gap.jacobian); None:
+    # forward differences at every step (one simulated sweep per parameter each)
+    jacobian_refresh: int | None = 4
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
