@@ -96,11 +96,10 @@ def _own_sweep(truth, physical, settle):
     from sknarx.rotor import EFFECTS, RotorBearingSimulator, RotorParameters
 
     m, b = truth["mismatch"], RotorParameters()
-    # one eccentricity in sknarx's rotor: the disks' mean, their difference as a phase
     params = b.replace(
         k1=b.k1 * m["k1"], k2=b.k2 * m["k2"],
         **{c: getattr(b, c) * m[c] for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
-        kB=b.kB * 0.5 * (m["kB_A"] + m["kB_B"]), e=b.e * 0.5 * (m["e_O1"] + m["e_O2"]),
+        kB=b.kB * m["kB_A"], kB_B=b.kB * m["kB_B"], e=b.e * m["e_O1"], e_O2=b.e * m["e_O2"],
         unbalance_phase=m["unbalance_phase"], beta=b.beta + m["beta_error"])
     effects = []
     for name, p in physical.items():

@@ -73,7 +73,8 @@ class SweepModel:
         su, ph, sk, sc = nuis
         b = self.base
         return b.replace(
-            e=b.e * su, unbalance_phase=b.unbalance_phase + ph, k1=b.k1 * sk, k2=b.k2 * sk,
+            e=b.e * su, e_O2=None if b.e_O2 is None else b.e_O2 * su,
+            unbalance_phase=b.unbalance_phase + ph, k1=b.k1 * sk, k2=b.k2 * sk,
             c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc,
             c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
         )

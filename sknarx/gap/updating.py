@@ -95,19 +95,24 @@ DEFAULT_PARAMETERS = (
     UpdatingParameter("c_d2", _DAMP, label="segment O2-B damping"),
     UpdatingParameter("c_O1", _DAMP, label="joint face 1 damping"),
     UpdatingParameter("c_O2", _DAMP, label="joint face 2 damping"),
-    UpdatingParameter("kB", _STIFF, label="ball contact stiffness"),
-    UpdatingParameter("clearance", _DAMP, label="bearing clearance"),
-    UpdatingParameter("e", _STIFF, label="unbalance (eccentricity)"),
+    UpdatingParameter("kB", _STIFF, label="bearing A ball contact stiffness"),
+    UpdatingParameter("kB_B", _STIFF, label="bearing B ball contact stiffness"),
+    UpdatingParameter("clearance", _DAMP, label="bearing A clearance"),
+    UpdatingParameter("clearance_B", _DAMP, label="bearing B clearance"),
+    UpdatingParameter("e", _STIFF, label="disk O1 unbalance (eccentricity)"),
+    UpdatingParameter("e_O2", _STIFF, label="disk O2 unbalance (eccentricity)"),
     UpdatingParameter("unbalance_phase", math.radians(30), log=False,
-                      label="unbalance angle at the keyphasor"),
-    UpdatingParameter("beta", math.radians(30), log=False, label="disk O2's unbalance angle"),
+                      label="disk O1 unbalance angle at the keyphasor"),
+    UpdatingParameter("beta", math.radians(30), log=False,
+                      label="disk O2 unbalance angle from disk O1's"),
 )
 
 
 def _apply(base: RotorParameters, spec, theta) -> RotorParameters:
     changes = {}
     for s, t in zip(spec, theta, strict=True):
-        p0 = getattr(base, s.name)
+        # a per-bearing or per-disk parameter left at None starts from the shared one
+        p0 = base.resolved(s.name)
         changes[s.name] = p0 * math.exp(t) if s.log else p0 + t
     return base.replace(**changes)
 
@@ -386,7 +391,7 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
              if abs(corr[i, j]) > corr_limit]
     rows = []
     for s, t, sd, ps in zip(spec, theta, std, prior, strict=True):
-        p0 = getattr(base, s.name)
+        p0 = base.resolved(s.name)
         change = math.expm1(t) if s.log else t
         # a log parameter's relative standard error, to first order: exp(t) sd
         std_rel = math.exp(t) * sd if s.log else sd

@@ -37,11 +37,13 @@ def bearing_force(x, y, phi, kB, gamma, expo, n_balls, cage_ratio):  # pragma: n
     return fx, fy
 
 
-def bearing_force_py(x, y, phi, params):
-    """Python-side evaluation (static equilibrium, linearisation, tests)."""
+def bearing_force_py(x, y, phi, params, which="A"):
+    """Python-side evaluation (static equilibrium, linearisation, tests) of bearing
+    ``which`` (``'A'`` or ``'B'``: each has its own contact stiffness and clearance)."""
+    kB, clearance = params.bearing(which)
     return np.array(
         bearing_force(
-            float(x), float(y), float(phi), params.kB, params.clearance,
+            float(x), float(y), float(phi), kB, clearance,
             params.hertz_exponent, int(params.n_balls), params.cage_ratio,
         )
     )

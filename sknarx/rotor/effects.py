@@ -535,7 +535,8 @@ class ClearanceChange(Effect):
     signature = "2x and ball-pass (3.08x) growth at the journals; response peak shift"
 
     def modify_parameters(self, params):
-        return params.replace(clearance=self.clearance)
+        # both bearings: the candidate is a change of the rig's bearings, not of one
+        return params.replace(clearance=self.clearance, clearance_B=None)
 
 
 # ---------------------------------------------------------------------- speed

@@ -42,9 +42,11 @@ def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
         c, s = math.cos(phi + ph), math.sin(phi + ph)
         f[ix] += me * (w * w * c + al * s)
         f[iy] += me * (w * w * s - al * c)
-    kB, gamma, expo, nb, cr = brg[0], brg[1], brg[2], int(brg[3]), brg[4]
+    expo, nb, cr = brg[2], int(brg[3]), brg[4]
     for b in range(2):
         ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
+        # bearing A's contact stiffness and clearance at 0, 1; bearing B's at 9, 10
+        kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
         fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, expo, nb, cr)
         f[ix] += fx
         f[iy] += fy

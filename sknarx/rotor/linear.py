@@ -20,15 +20,16 @@ from .matrices import DOF_INDEX
 __all__ = ["LinearRotorModel", "bearing_stiffness"]
 
 
-def bearing_stiffness(x, y, params, n_avg: int = 16, rel_step: float = 1e-3):
-    """Averaged 2x2 tangent stiffness ``-dF/dq`` (N/m) of one bearing at (x, y)."""
-    h = rel_step * max(abs(x), abs(y), params.clearance, 1e-7)
+def bearing_stiffness(x, y, params, n_avg: int = 16, rel_step: float = 1e-3, which="A"):
+    """Averaged 2x2 tangent stiffness ``-dF/dq`` (N/m) of bearing ``which`` (``'A'`` or
+    ``'B'``) at (x, y)."""
+    h = rel_step * max(abs(x), abs(y), params.bearing(which)[1], 1e-7)
     pitch = 2 * np.pi / params.n_balls / params.cage_ratio  # shaft angle of one ball pitch
     Kb = np.zeros((2, 2))
     for phi in np.linspace(0.0, pitch, n_avg, endpoint=False):
         for j, (dx, dy) in enumerate(((h, 0.0), (0.0, h))):
-            fp = bearing_force_py(x + dx, y + dy, phi, params)
-            fm = bearing_force_py(x - dx, y - dy, phi, params)
+            fp = bearing_force_py(x + dx, y + dy, phi, params, which)
+            fm = bearing_force_py(x - dx, y - dy, phi, params, which)
             Kb[:, j] -= (fp - fm) / (2 * h)
     return Kb / n_avg
 

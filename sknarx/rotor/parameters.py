@@ -7,6 +7,9 @@ from dataclasses import asdict, dataclass, fields, replace
 
 __all__ = ["RotorParameters", "DOF_NAMES"]
 
+#: per-bearing and per-disk parameters -> the shared one they default to
+_SHARED = {"kB_B": "kB", "clearance_B": "clearance", "e_O2": "e"}
+
 #: Generalised coordinates, in matrix order (t = tilt; x horizontal, y vertical up).
 DOF_NAMES = (
     "xA", "yA", "xO1", "yO1", "txO1", "tyO1", "xO2", "yO2", "txO2", "tyO2", "xB", "yB",
@@ -52,7 +55,7 @@ class RotorParameters:
         Damping of the two faces of the bolted joint, N s/m (3000); they act in
         parallel on the disks' relative lateral displacement.
     e : float
-        Disk eccentricity, m (0.6e-3).
+        Disk eccentricity, m (0.6e-3): disk O1's, and disk O2's unless ``e_O2``.
     beta : float
         Eccentric phase of disk O2 relative to O1, rad (pi/4).
     unbalance_phase : float
@@ -60,9 +63,17 @@ class RotorParameters:
         (0: the paper's convention; a rig's is unknown and calibrated).
     kB : float
         Hertzian contact stiffness of a ball, N/m^1.5 (13.34e9; the paper prints
-        13.34e6, a misprint: see docs).
+        13.34e6, a misprint: see docs); bearing A's, and bearing B's unless ``kB_B``.
     clearance : float
-        Radial clearance gamma, m (0.5e-6: Table 2 gives 2 r0 = 1 um).
+        Radial clearance gamma, m (0.5e-6: Table 2 gives 2 r0 = 1 um); bearing A's,
+        and bearing B's unless ``clearance_B``.
+    kB_B, clearance_B : float or None
+        Bearing B's contact stiffness (N/m^1.5) and clearance (m) where they differ
+        from bearing A's (None: ``kB`` and ``clearance`` hold for both). A rig's two
+        bearings are rarely alike; model updating fits each.
+    e_O2 : float or None
+        Disk O2's eccentricity, m, where it differs from disk O1's ``e`` (None: ``e``
+        for both); with ``beta`` it makes O2's unbalance a vector of its own.
     n_balls : int
         Number of balls Nb (8).
     R_outer, r_inner : float
@@ -106,6 +117,9 @@ class RotorParameters:
     r_inner: float = 40.1e-3
     hertz_exponent: float = 1.5
     gravity: float = 9.81
+    kB_B: float | None = None
+    clearance_B: float | None = None
+    e_O2: float | None = None
 
     def __post_init__(self):
         self.validate()
@@ -127,6 +141,13 @@ class RotorParameters:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 problems.append(f"{name}={v!r} must be finite and >= 0")
+        for name, positive_only in (("kB_B", True), ("clearance_B", False), ("e_O2", False)):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v)
+                                      and (v > 0 if positive_only else v >= 0)):
+                problems.append(f"{name}={v!r} must be None (same as "
+                                f"{_SHARED[name]}) or a finite "
+                                f"{'positive number' if positive_only else 'value >= 0'}")
         for name in ("beta", "unbalance_phase"):
             if not math.isfinite(getattr(self, name)):
                 problems.append(f"{name}={getattr(self, name)!r} must be finite (rad)")
@@ -162,6 +183,21 @@ class RotorParameters:
     def ball_pass_ratio(self) -> float:
         """Varying-compliance frequency over shaft frequency, ``BN = Nb r / (R + r)``."""
         return self.n_balls * self.cage_ratio
+
+    def resolved(self, name: str) -> float:
+        """The value ``name`` takes in the model: a per-bearing or per-disk parameter
+        (``kB_B``, ``clearance_B``, ``e_O2``) left at None falls back to the shared one
+        (``kB``, ``clearance``, ``e``)."""
+        v = getattr(self, name)
+        return getattr(self, _SHARED[name]) if v is None and name in _SHARED else v
+
+    def bearing(self, which: str) -> tuple[float, float]:
+        """``(kB, clearance)`` of bearing ``'A'`` or ``'B'`` (N/m^1.5, m)."""
+        if which == "A":
+            return self.kB, self.clearance
+        if which == "B":
+            return self.resolved("kB_B"), self.resolved("clearance_B")
+        raise ValueError(f"A bearing is 'A' or 'B', not {which!r}.")
 
     def replace(self, **changes) -> RotorParameters:
         """A copy with some values changed (validated)."""

@@ -22,13 +22,14 @@ def numpy_rhs(sim, omega: float):
     fg = m.gravity_force
     nb = int(p.n_balls)
     pitch = 2 * np.pi * np.arange(nb) / nb
-    me1, me2 = p.m_O1 * p.e, p.m_O2 * p.e
+    me1, me2 = p.m_O1 * p.e, p.m_O2 * p.resolved("e_O2")
 
-    def bearing(x, y, phi):
+    def bearing(x, y, phi, which):
+        kB, clearance = p.bearing(which)
         th = pitch + p.cage_ratio * phi
         c, s = np.cos(th), np.sin(th)
-        d = x * c + y * s - p.clearance
-        f = p.kB * np.where(d > 0, d, 0.0) ** p.hertz_exponent
+        d = x * c + y * s - clearance
+        f = kB * np.where(d > 0, d, 0.0) ** p.hertz_exponent
         return -(f * c).sum(), -(f * s).sum()
 
     def rhs(t, z):
@@ -40,8 +41,8 @@ def numpy_rhs(sim, omega: float):
         f[3] += me1 * w2 * np.sin(phi)
         f[6] += me2 * w2 * np.cos(phi + p.beta)
         f[7] += me2 * w2 * np.sin(phi + p.beta)
-        for ix, iy in ((0, 1), (10, 11)):
-            fbx, fby = bearing(q[ix], q[iy], omega * t)
+        for ix, iy, which in ((0, 1, "A"), (10, 11, "B")):
+            fbx, fby = bearing(q[ix], q[iy], omega * t, which)
             f[ix] += fbx
             f[iy] += fby
         a = minv * (f - D @ v - K @ q)

@@ -108,12 +108,12 @@ class RotorBearingSimulator:
 
         def residual(q):
             f = m.gravity_force - m.K @ q
-            f[[0, 1]] += bearing_force_py(q[0], q[1], 0.0, p)
-            f[[10, 11]] += bearing_force_py(q[10], q[11], 0.0, p)
+            f[[0, 1]] += bearing_force_py(q[0], q[1], 0.0, p, "A")
+            f[[10, 11]] += bearing_force_py(q[10], q[11], 0.0, p, "B")
             return f
 
         guess = np.zeros(12)
-        guess[[1, 3, 7, 11]] = -(p.clearance + 2e-5)
+        guess[[1, 3, 7, 11]] = -(max(p.clearance, p.resolved("clearance_B")) + 2e-5)
         sol = root(residual, guess, method="hybr", options={"xtol": 1e-14})
         scale = max(np.max(np.abs(m.gravity_force)), 1.0)
         if np.max(np.abs(residual(sol.x))) > 1e-8 * scale:
@@ -129,13 +129,15 @@ class RotorBearingSimulator:
         q_static = self._static()
         ph = p.unbalance_phase
         unb = np.array([[p.m_O1 * p.e, ph, DOF_INDEX["xO1"], DOF_INDEX["yO1"]],
-                        [p.m_O2 * p.e, p.beta + ph, DOF_INDEX["xO2"], DOF_INDEX["yO2"]]])
+                        [p.m_O2 * p.resolved("e_O2"), p.beta + ph, DOF_INDEX["xO2"],
+                         DOF_INDEX["yO2"]]])
+        # bearing A's contact stiffness and clearance first, bearing B's last
         brg = np.array([p.kB, p.clearance, p.hertz_exponent, p.n_balls, p.cage_ratio,
-                        DOF_INDEX["xA"], DOF_INDEX["yA"], DOF_INDEX["xB"], DOF_INDEX["yB"]],
-                       dtype=float)
+                        DOF_INDEX["xA"], DOF_INDEX["yA"], DOF_INDEX["xB"], DOF_INDEX["yB"],
+                        *p.bearing("B")], dtype=float)
         ctx = EffectContext(q_static=q_static, params=p, bearing_stiffness=(
-            bearing_stiffness(q_static[0], q_static[1], p),
-            bearing_stiffness(q_static[10], q_static[11], p)))
+            bearing_stiffness(q_static[0], q_static[1], p, which="A"),
+            bearing_stiffness(q_static[10], q_static[11], p, which="B")))
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
@@ -146,13 +148,13 @@ class RotorBearingSimulator:
         p, m = self.effective_params, self.matrices
         q = self.static_equilibrium()
         K = m.K.copy()
-        for ix, iy in ((0, 1), (10, 11)):
-            K[np.ix_([ix, iy], [ix, iy])] += bearing_stiffness(q[ix], q[iy], p)
+        for ix, iy, which in ((0, 1, "A"), (10, 11, "B")):
+            K[np.ix_([ix, iy], [ix, iy])] += bearing_stiffness(q[ix], q[iy], p, which=which)
         unb = np.zeros(12, dtype=complex)
-        for name, mass, ph in (("O1", p.m_O1, p.unbalance_phase),
-                               ("O2", p.m_O2, p.beta + p.unbalance_phase)):
-            unb[DOF_INDEX["x" + name]] = mass * p.e * np.exp(1j * ph)
-            unb[DOF_INDEX["y" + name]] = -1j * mass * p.e * np.exp(1j * ph)
+        for name, me, ph in (("O1", p.m_O1 * p.e, p.unbalance_phase),
+                             ("O2", p.m_O2 * p.resolved("e_O2"), p.beta + p.unbalance_phase)):
+            unb[DOF_INDEX["x" + name]] = me * np.exp(1j * ph)
+            unb[DOF_INDEX["y" + name]] = -1j * me * np.exp(1j * ph)
         return LinearRotorModel(M=m.M, C=m.C, G=m.G, K=K, unbalance=unb)
 
     @cached_property
