@@ -139,9 +139,7 @@ def _trial(names, rng, seed, speeds, fs, n_samples, base):
             "unbalance_phase": rng.uniform(-np.pi, np.pi)}
     b = base
     sc = nuis["damping_scale"]
-    params = b.replace(
-        e=b.e * nuis["unbalance_scale"],
-        e_O2=None if b.e_O2 is None else b.e_O2 * nuis["unbalance_scale"],
+    params = b.with_unbalance_scaled(nuis["unbalance_scale"]).replace(
         unbalance_phase=nuis["unbalance_phase"],
         k1=b.k1 * nuis["stiffness_scale"], k2=b.k2 * nuis["stiffness_scale"],
         c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc, c_O1=b.c_O1 * sc,

@@ -72,8 +72,7 @@ class SweepModel:
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis
         b = self.base
-        return b.replace(
-            e=b.e * su, e_O2=None if b.e_O2 is None else b.e_O2 * su,
+        return b.with_unbalance_scaled(su).replace(
             unbalance_phase=b.unbalance_phase + ph, k1=b.k1 * sk, k2=b.k2 * sk,
             c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc,
             c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
@@ -394,15 +393,12 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         # apart
         short = [(local(x0, max(3, max_nfev // 4), combo, jacobian_refresh), combo)
                  for x0, combo in x0s]
-        x0s = []
-        for c in combos:
-            runs = [r for r, rc in short if rc is c]
-            if runs:
-                x0s.append((min(runs, key=lambda r: r.cost).x, c))
-        if len(x0s) > 1:
-            logger.debug("discrete settings, best short-run cost: %s", ", ".join(
-                f"{c}: {2 * min(r.cost for r, rc in short if rc is c):.4g}"
-                for _, c in x0s))
+        best = [(min(runs, key=lambda r: r.cost), c) for c in combos
+                if (runs := [r for r, rc in short if rc is c])]
+        if len(best) > 1:
+            logger.debug("discrete settings, best short-run cost: %s",
+                         ", ".join(f"{c}: {2 * r.cost:.4g}" for r, c in best))
+        x0s = [(r.x, c) for r, c in best]
     finals = [(local(x0, max_nfev, combo), combo) for x0, combo in x0s]
     if len(finals) > 1:
         logger.debug("discrete settings, converged cost: %s",

@@ -245,7 +245,7 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
     """
     tick = tick or (lambda msg: None)
     singles = run_parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
-                        "effect candidates")
+                           "effect candidates")
     tick("single candidates")
     ranked = rank(singles, E0, cmp0)
     if not ranked:
@@ -262,7 +262,7 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
         others = [c for c in candidates if (c,) != lead.names]
         partners = front.partners(lead, others, settings.n_partners)
         pairs = run_parallel(settings.n_jobs,
-                          [lambda p=p: front.fit_pair(lead, p) for p in partners], "pairs")
+                             [lambda p=p: front.fit_pair(lead, p) for p in partners], "pairs")
         if pairs:
             top = rank(pairs, E0, cmp0)[0]["_fit"]
             for new in front.refit_members(top):

@@ -84,12 +84,3 @@ class SecantJacobian:
         self._evaluated = 0
         self._x, self._f = x.copy(), f
         return self._J
-
-    def difference_at(self, x):
-        """A forward-difference Jacobian at ``x`` (e.g. for the uncertainty of the
-        solution, which a secant Jacobian does not give)."""
-        x = np.asarray(x, dtype=float)
-        f = self._seen.get(x.tobytes())
-        if f is None:
-            f = self.residual(x)
-        return forward_difference(self.residual, x, f, self.lo, self.hi, self.rel_step)

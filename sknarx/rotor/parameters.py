@@ -191,6 +191,12 @@ class RotorParameters:
         v = getattr(self, name)
         return getattr(self, _SHARED[name]) if v is None and name in _SHARED else v
 
+    def with_unbalance_scaled(self, factor: float) -> RotorParameters:
+        """A copy with both disks' eccentricity multiplied by ``factor`` (O2's own
+        ``e_O2`` too where it is set)."""
+        return self.replace(e=self.e * factor,
+                            e_O2=None if self.e_O2 is None else self.e_O2 * factor)
+
     def bearing(self, which: str) -> tuple[float, float]:
         """``(kB, clearance)`` of bearing ``'A'`` or ``'B'`` (N/m^1.5, m)."""
         if which == "A":
