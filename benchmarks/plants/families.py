@@ -18,6 +18,8 @@ written here, once, for all families. What a family cannot express is listed in
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 CHANNELS = ("xO1", "yO1", "xA", "yA", "xB", "yB")
@@ -92,7 +94,9 @@ def draw_trial(kind, seed, family):
 
 
 # ------------------------------------------------------------------ the families
-def _own_sweep(truth, physical, settle):
+def _own_sweep(truth, physical, settle, plant=None):
+    if plant:
+        raise ValueError("the own family has no plant variants")
     from sknarx.rotor import EFFECTS, RotorBearingSimulator, RotorParameters
 
     m, b = truth["mismatch"], RotorParameters()
@@ -132,11 +136,13 @@ def _own_sweep(truth, physical, settle):
     return sim.sweep(list(SPEEDS), fs=1000.0, n_samples=1000, settle=settle, progress=False)
 
 
-def _second_sweep(truth, physical, settle):
+def _second_sweep(truth, physical, settle, plant=None):
     from plants.second_derivation import SecondDerivationPlant, SecondRotor
 
-    m, r = truth["mismatch"], SecondRotor()
-    rotor = SecondRotor(
+    # ``plant``: SecondRotor fields that differ from the family's plant (a variant for
+    # analysis; the mismatch is drawn on top of them)
+    m, r = truth["mismatch"], SecondRotor(**(plant or {}))
+    rotor = dataclasses.replace(r,
         k1=r.k1 * m["k1"], k2=r.k2 * m["k2"],
         **{c: getattr(r, c) * m[c] for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
         kB_A=r.kB_A * m["kB_A"], kB_B=r.kB_B * m["kB_B"],
@@ -174,9 +180,11 @@ def _second_sweep(truth, physical, settle):
     return SecondDerivationPlant(rotor).sweep(SPEEDS, CHANNELS, settle=settle)
 
 
-def _ross_sweep(truth, physical, settle):
+def _ross_sweep(truth, physical, settle, plant=None):
     from plants.ross_paper_rotor import ross_sweep
 
+    if plant:
+        raise ValueError("the ross family has no plant variants")
     return ross_sweep(truth, physical, SPEEDS, CHANNELS, settle=settle)
 
 
@@ -209,13 +217,17 @@ def measure(clean, truth):
     return out
 
 
-def make_family_trial(kind, seed, family):
-    """Measured sweep, truth, and the clean sweeps with and without the effects."""
+def make_family_trial(kind, seed, family, plant=None):
+    """Measured sweep, truth, and the clean sweeps with and without the effects.
+
+    ``plant``: fields of the family's plant to change (``second`` only; for analysing
+    what of a gap a plant's reading causes -- the benchmark never sets it).
+    """
     truth = draw_trial(kind, seed, family)
     sweep, settle = _SWEEP[family]
     physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
-    clean = sweep(truth, physical, settle)
-    clean_free = sweep(truth, {}, settle) if physical else clean
+    clean = sweep(truth, physical, settle, plant)
+    clean_free = sweep(truth, {}, settle, plant) if physical else clean
     measured = measure(clean, truth)
     # the clean truth for the oracle: the plant with its effects, measurement effects on
     # top but no noise (the oracle knows every effect, not the noise)

@@ -104,6 +104,8 @@ class SecondRotor:
     phase_O1: float = 0.0
     phase_O2: float = np.pi / 4
     gravity: float = 9.81
+    #: journal probes on the housings (journal minus housing) or on the frame (absolute)
+    probes_on_housings: bool = True
     effects: dict = field(default_factory=dict)
 
     def matrices(self):
@@ -384,7 +386,8 @@ class SecondDerivationPlant:
         # sample k is stored after step (k + 1) * substeps; t = 0 is the shaft angle's zero
         res = {"t": np.arange(1, n_samples + 1) / fs}
         for name, (i, j) in PROBES.items():
-            res[name] = rec[:, i] - (rec[:, j] if j >= 0 else 0.0)
+            rel = j >= 0 and p.probes_on_housings
+            res[name] = rec[:, i] - (rec[:, j] if rel else 0.0)
         return res
 
     def sweep(self, speeds, channels, fs=1000.0, n_samples=1000, settle=1.5):
