@@ -13,6 +13,11 @@ its journal probes on the frame instead of the housings, pedestals ten times sti
 sknarx's clearance reading (0.5 um radial) in the plant, or the plant's reading
 (1 um radial) in the model (``RotorParameters(clearance=1e-6)``). A variant is
 analysis, never a benchmark trial; no threshold is set from it.
+
+A second table compares the plants' nominal 1x (no mismatch, no effect, no noise):
+the median over the speeds of ``|z_plant - z_sknarx| / |z_sknarx|`` per channel, with
+sknarx's disk dampers across the segments (its reading) and from the disks to the frame
+(``frame_share_d1 = frame_share_d2 = 1``, the other plants' reading).
 """
 
 from __future__ import annotations
@@ -24,8 +29,10 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy as np  # noqa: E402
 from _common import table, write_json  # noqa: E402
-from plants.families import CHANNELS, make_family_trial  # noqa: E402
+from plants import families  # noqa: E402
+from plants.families import CHANNELS, SPEEDS, make_family_trial  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
 from sknarx.rotor import RotorParameters  # noqa: E402
@@ -63,8 +70,42 @@ def run(label, family, plant, model_clearance, seed):
         "excess_by_channel": cmp0.groupby("channel").excess.sum().round(2).to_dict(),
         "journal_1x_tolerance": {c: tol[c] for c in ("xA", "yA", "xB", "yB")},
         "clearance_resolution": {"A": res.get("clearance"), "B": res.get("clearance_B")},
+        "frame_shares": {p["parameter"]: [p["updated"], p["std"]] for p in upd["parameters"]
+                         if p["parameter"].startswith("frame_share")},
         "updates": upd["updates"], "seconds": time.perf_counter() - t,
     }
+
+
+def _orders_1x(sweep):
+    """Each step's 1x vector per channel (m, complex), speeds x channels."""
+    out = []
+    for w in SPEEDS:
+        g = sweep[sweep.speed == w]
+        ph = np.exp(-1j * w * g.t.to_numpy())
+        out.append([2 * np.mean(g[c].to_numpy() * ph) for c in CHANNELS])
+    return np.array(out)
+
+
+def nominal_differences():
+    """Median relative 1x vector difference of each plant's nominal sweep to sknarx's."""
+    from sknarx.rotor import RotorBearingSimulator
+
+    neutral = {"mismatch": {**dict.fromkeys(("k1", "k2", "c_a", "c_b", "c_d1", "c_d2",
+                                             "c_O1", "c_O2", "kB_A", "kB_B", "e_O1",
+                                             "e_O2"), 1.0),
+                            "unbalance_phase": 0.0, "beta_error": 0.0}}
+    plants = {f: _orders_1x(families._SWEEP[f][0](neutral, {}, families._SWEEP[f][1]))
+              for f in ("second", "ross")}
+    out = {}
+    for reading, share in (("sknarx's reading", 0.0), ("disk dampers to the frame", 1.0)):
+        own = _orders_1x(RotorBearingSimulator(RotorParameters(
+            frame_share_d1=share, frame_share_d2=share)).sweep(
+            list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False))
+        for f, z in plants.items():
+            rel = np.median(np.abs(z - own) / np.abs(own), axis=0)
+            out[f"{f} vs sknarx ({reading})"] = dict(zip(CHANNELS, rel.round(3).tolist(),
+                                                         strict=True))
+    return out
 
 
 def main():
@@ -73,6 +114,9 @@ def main():
                     help="effect-free trial seeds (the blind benchmark's draw)")
     ap.add_argument("--ross", action="store_true", help="also the ROSS plant as drawn")
     args = ap.parse_args()
+    nominal = nominal_differences()
+    table([[k, *(f"{v[c]:.2f}" for c in CHANNELS)] for k, v in nominal.items()],
+          ["nominal 1x, median |difference| / |sknarx|", *CHANNELS])
     seeds = [int(s) for s in args.seeds.split(",")]
     variants = VARIANTS + ((ROSS,) if args.ross else ())
     rows, out = [], []
@@ -85,13 +129,14 @@ def main():
             rows.append([r["variant"], seed, f"{r['gap_per_feature']:.3f}",
                          ", ".join(f"{k} {v:.0f}" for k, v in top),
                          f"{min(tol.values()):.2f}-{max(tol.values()):.2f}",
-                         f"{r['clearance_resolution']['A']:.2f}"])
+                         f"{r['clearance_resolution']['A']:.2f}",
+                         " ".join(f"{v[0]:.2f}" for v in r["frame_shares"].values()) or "-"])
             print(f"{r['variant']} / {seed}: {r['gap_per_feature']:.3f} per feature "
                   f"({r['seconds']:.0f} s)", flush=True)
     table(rows, ["variant", "seed", "gap / feature", "largest excess (feature: sum)",
-                 "journal 1x tolerance", "clearance A resolution"])
+                 "journal 1x tolerance", "clearance A resolution", "damper shares"])
     print(f"noise floor: {DiagnosisSettings().no_gap_per_feature} per feature")
-    write_json("bench_gap_model_form", {"rows": out})
+    write_json("bench_gap_model_form", {"nominal_1x_difference": nominal, "rows": out})
 
 
 if __name__ == "__main__":

@@ -85,7 +85,7 @@ def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
 
 
 @pytest.mark.slow
-def test_update_stays_physical_on_a_plant_it_cannot_follow():
+def test_update_stays_physical_and_finds_where_the_second_plants_dampers_act():
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.diagnosis import _update_nominal
     from sknarx.gap.features import order_features
@@ -106,7 +106,12 @@ def test_update_stays_physical_on_a_plant_it_cannot_follow():
     theta = np.where(tab["log"], np.log1p(tab["change"].astype(float)), tab["change"])
     assert np.all(np.abs(theta) < 3 * tab["prior_std"])
     tol = upd.mismatch["model_tolerance"]
-    # the disks are followed, the journals (probes on housings the model lacks) are not
+    # this plant's disk dampers act from the disks to the frame: the update says so, and
+    # with them there its journals are followed too (measured: shares 1.00 and 0.81;
+    # journals' tolerances 0.05-0.12, where with the dampers held across the segments
+    # they widened to 0.4-0.9 and the journals stopped counting)
     assert max(tol["xO1"], tol["yO1"]) < 0.05
-    assert min(tol[c] for c in ("xA", "yA", "xB", "yB")) > 0.15
+    assert max(tol[c] for c in ("xA", "yA", "xB", "yB")) < 0.25
+    for share in ("frame_share_d1", "frame_share_d2"):
+        assert tab.loc[share, "updated"] > 0.5 and tab.loc[share, "significant"]
     assert upd.mismatch["after"] < 0.5 * upd.mismatch["before"]

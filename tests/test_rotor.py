@@ -380,3 +380,34 @@ def test_each_bearing_and_each_disk_can_have_its_own_values():
         base.replace(kB_B=-1.0)
     with pytest.raises(ValueError, match="bearing"):
         base.bearing("C")
+
+
+def test_a_disk_damper_can_act_to_the_frame():
+    """``frame_share_d1``/``_d2`` move a share of each disk damper from across its shaft
+    segment to between the disk and the frame; 0 is the model of docs/rotor_model.md,
+    bit for bit."""
+    from sknarx.rotor.matrices import DOF_INDEX, assemble
+
+    base = R.RotorParameters()
+    C0 = assemble(base).C
+    assert np.array_equal(assemble(base.replace(frame_share_d1=0.0)).C, C0)
+    C1 = assemble(base.replace(frame_share_d1=1.0, frame_share_d2=1.0)).C
+    a, o1, o2, b = (DOF_INDEX[n] for n in ("xA", "xO1", "xO2", "xB"))
+    assert C1[a, o1] == 0.0 and C1[o2, b] == 0.0  # no damper across the segments
+    assert C1[o1, o1] == pytest.approx(C0[o1, o1])  # the disk still sees c_d1
+    assert C1[a, a] == pytest.approx(C0[a, a] - base.c_d1)  # the journal no longer
+    with pytest.raises(ValueError, match="frame_share_d2"):
+        base.replace(frame_share_d2=1.5)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(s1=st.floats(0.0, 1.0), s2=st.floats(0.0, 1.0), c1=st.floats(0.0, 1e4),
+       c2=st.floats(0.0, 1e4))
+def test_damping_stays_symmetric_and_dissipative_wherever_the_disk_dampers_act(s1, s2,
+                                                                               c1, c2):
+    from sknarx.rotor.matrices import assemble
+
+    C = assemble(R.RotorParameters(c_d1=c1, c_d2=c2, frame_share_d1=s1,
+                                   frame_share_d2=s2)).C
+    assert np.array_equal(C, C.T)
+    assert np.linalg.eigvalsh(C).min() >= -1e-9 * max(np.abs(C).max(), 1.0)

@@ -143,3 +143,31 @@ def test_each_bearing_and_each_disk_is_updated_on_its_own():
     assert res.mismatch["after"] < 0.2 * res.mismatch["before"]
     assert res.params.kB_B is not None and res.params.e_O2 is not None
     assert {"kB_B", "clearance_B", "e_O2"} <= {p.name for p in DEFAULT_PARAMETERS}
+
+
+def test_update_finds_where_each_disk_damper_acts():
+    """The paper does not say where its disk dampers act; a rig whose dampers act from
+    the disks to the frame (shares 0.8 and 0.6 of them) and whose segment A-O1 is 15 %
+    softer is updated to those shares and that segment, and the report says so in the
+    share's own unit."""
+    speeds = np.linspace(60, 280, 12)
+    true = RotorParameters(k1=0.85 * 8e5, frame_share_d1=0.8, frame_share_d2=0.6)
+    z, se = _noisy(linear_1x(true, speeds, SIX), 0.005)
+    with pytest.warns(UserWarning, match="journal"):  # the data are linear here
+        res = update_nominal_model(z, se, speeds, SIX, model="linear")
+    row = res.table.set_index("parameter")
+    assert row.loc["frame_share_d1", "updated"] == pytest.approx(0.8, abs=0.15)
+    assert row.loc["frame_share_d2", "updated"] == pytest.approx(0.6, abs=0.15)
+    assert row.loc["k1", "change"] == pytest.approx(-0.15, abs=0.03)
+    assert res.mismatch["after"] < 0.05 * res.mismatch["before"]
+    assert 0.0 <= res.params.frame_share_d1 <= 1.0
+    line = next(s for s in res.describe() if "frame_share_d1" in s)
+    assert "deg" not in line and "%" not in line
+
+
+def test_a_bounded_parameter_starting_outside_its_bounds_is_an_error():
+    with pytest.raises(ValueError, match="outside its bounds"):
+        update_nominal_model(np.ones((2, 1)) * 1e-6, 1e-8, [100.0, 200.0], ["xO1"],
+                             parameters=(UpdatingParameter("c_d1", 1.0, log=False,
+                                                           bounds=(0.0, 10.0)),),
+                             model="linear")

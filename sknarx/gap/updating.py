@@ -75,12 +75,20 @@ class UpdatingParameter:
         Whether the parameter is positive and updated on a log scale.
     label : str
         What an engineer calls it, for the report.
+    bounds : (float, float), optional
+        Limits of the parameter's value (its own unit), for a parameter that cannot
+        leave a range (a share between 0 and 1).
+    unit : str
+        Unit of an additive parameter's change in the report: ``"deg"`` (the change
+        is in rad, reported in degrees) or ``""`` (a number).
     """
 
     name: str
     prior_width: float
     log: bool = True
     label: str = ""
+    bounds: tuple | None = None
+    unit: str = "deg"
 
 
 DEFAULT_PARAMETERS = (
@@ -93,6 +101,12 @@ DEFAULT_PARAMETERS = (
     UpdatingParameter("c_b", _DAMP, label="bearing B damping"),
     UpdatingParameter("c_d1", _DAMP, label="segment A-O1 damping"),
     UpdatingParameter("c_d2", _DAMP, label="segment O2-B damping"),
+    # where each disk damper acts (the paper does not say): across its segment (0) or
+    # from the disk to the frame (1); prior +-0.5, as unknown as a share gets
+    UpdatingParameter("frame_share_d1", 0.5, log=False, bounds=(0.0, 1.0), unit="",
+                      label="share of c_d1 acting disk O1 to frame"),
+    UpdatingParameter("frame_share_d2", 0.5, log=False, bounds=(0.0, 1.0), unit="",
+                      label="share of c_d2 acting disk O2 to frame"),
     UpdatingParameter("c_O1", _DAMP, label="joint face 1 damping"),
     UpdatingParameter("c_O2", _DAMP, label="joint face 2 damping"),
     UpdatingParameter("kB", _STIFF, label="bearing A ball contact stiffness"),
@@ -115,6 +129,23 @@ def _apply(base: RotorParameters, spec, theta) -> RotorParameters:
         p0 = base.resolved(s.name)
         changes[s.name] = p0 * math.exp(t) if s.log else p0 + t
     return base.replace(**changes)
+
+
+def _theta_bounds(base: RotorParameters, spec):
+    """Each parameter's bounds in the update's coordinates (unbounded: +-inf)."""
+    lower, upper = np.full(len(spec), -np.inf), np.full(len(spec), np.inf)
+    for i, s in enumerate(spec):
+        if s.bounds is None:
+            continue
+        p0 = base.resolved(s.name)
+        lo, hi = s.bounds
+        if not lo <= p0 <= hi:
+            raise ValueError(f"{s.name}={p0!r} lies outside its bounds {s.bounds}.")
+        if s.log:
+            lower[i], upper[i] = math.log(lo / p0), math.log(hi / p0)
+        else:
+            lower[i], upper[i] = lo - p0, hi - p0
+    return lower, upper
 
 
 def linear_1x(params: RotorParameters, speeds, channels) -> np.ndarray:
@@ -195,6 +226,9 @@ class UpdateResult:
             if r.log:
                 out.append(f"{r.label} ({r.parameter}): {100 * r.change:+.1f} % "
                            f"+- {100 * r.std:.1f} %")
+            elif r.unit != "deg":
+                out.append(f"{r.label} ({r.parameter}): {r.change:+.2f} +- {r.std:.2f}"
+                           + (f" {r.unit}" if r.unit else ""))
             else:
                 out.append(f"{r.label} ({r.parameter}): {math.degrees(r.change):+.1f} deg "
                            f"+- {math.degrees(r.std):.1f} deg")
@@ -297,6 +331,8 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
     prior = np.array([s.prior_width for s in spec], dtype=float)
     if not np.all(prior > 0):
         raise ValueError("Every prior_width must be positive.")
+    lower, upper = _theta_bounds(base, spec)
+    method = "dogbox" if np.isfinite(np.r_[lower, upper]).any() else "trf"
     nl_kw = dict(nonlinear_kwargs or {})
 
     # the latest nonlinear sweep: least_squares asks for the Jacobian at the point whose
@@ -344,8 +380,10 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         J = np.empty((2 * z.size + len(spec), len(spec)))
         for i in range(len(spec)):
             t = theta.copy()
-            t[i] += h
-            df = (centre(forward(t, "linear") - f0, s0) / h / s0).ravel()
+            # step inward at an upper bound (a share of 1 cannot be exceeded)
+            hi = -h if t[i] + h > upper[i] else h
+            t[i] += hi
+            df = (centre(forward(t, "linear") - f0, s0) / hi / s0).ravel()
             J[: 2 * z.size, i] = np.r_[-df.real, -df.imag]
         J[2 * z.size:] = np.diag(1.0 / prior)
         return J
@@ -367,8 +405,10 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         # priors, and what it fits well tightens its tolerance for the next
         tol = np.maximum(rtol, channel_misfit(f_nom))
     for round_ in range(model_error_rounds + 1):
-        res = least_squares(resid, theta, jac=jac, method="trf", x_scale=prior,
-                            max_nfev=max_nfev)
+        # dogbox: a bounded parameter starts on its bound (a share at 0) and the
+        # trust-region reflective method barely leaves a bound it starts on
+        res = least_squares(resid, theta, jac=jac, method=method, x_scale=prior,
+                            bounds=(lower, upper), max_nfev=max_nfev)
         theta = res.x
         f_upd = forward(theta)
         if round_ == model_error_rounds:
@@ -383,7 +423,15 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
     dof = max(r1.size - len(spec), 1)
     inflate = max(1.0, float(r1 @ r1) / dof)  # model-form error beyond the stated noise
     H = Jd.T @ Jd * (1.0 / inflate) + np.diag(1.0 / prior**2)
-    cov = np.linalg.inv(H)
+    # a parameter held at a bound (a damper share at 0) cannot trade with the others
+    # across it: the covariance is the free parameters' (an active-set posterior), and
+    # the held one gets its conditional variance; the unconstrained inverse let a share
+    # at 0 widen c_d2's error tenfold (+-21 % for the +-2 % the data give)
+    held = (theta <= lower + 1e-12) | (theta >= upper - 1e-12)
+    free = ~held
+    cov = np.zeros_like(H)
+    cov[np.ix_(free, free)] = np.linalg.inv(H[np.ix_(free, free)])
+    cov[held, held] = 1.0 / np.diag(H)[held]
     std = np.sqrt(np.diag(cov))
     corr = cov / np.outer(std, std)
     pairs = [(spec[i].name, spec[j].name, float(corr[i, j]))
@@ -396,6 +444,7 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         # a log parameter's relative standard error, to first order: exp(t) sd
         std_rel = math.exp(t) * sd if s.log else sd
         rows.append({"parameter": s.name, "label": s.label or s.name, "log": s.log,
+                     "unit": "" if s.log else s.unit,
                      "nominal": p0, "updated": getattr(_apply(base, spec, theta), s.name),
                      "change": change, "std": std_rel,
                      "prior_std": ps, "resolution": 1.0 - (sd / ps) ** 2,

@@ -15,7 +15,8 @@ the slope ``dy/dz = -tx``; both planes share one 6x6 *plane model* over
   in parallel with the contact stiffness ``kb`` on the relative lateral
   displacement and ``k_theta`` on the relative tilt;
 * damping: ``c_a, c_b`` at the bearings to ground, ``c_d1, c_d2`` on the relative
-  lateral displacement of each disk and its bearing (shaft bending damping),
+  lateral displacement of each disk and its bearing (shaft bending damping; the
+  share ``frame_share_d1``, ``frame_share_d2`` of each from the disk to ground),
   ``c_O1 + c_O2`` on the relative lateral displacement of the two disks (the
   bolted joint's interface damping);
 * gyroscopic moments ``J_polar * Omega`` couple the tilts of each disk.
@@ -78,8 +79,12 @@ def plane_matrices(p: RotorParameters):
     )
     K[1:5, 1:5] += beam
     C = np.zeros((6, 6))
-    C += _rank1([-1, 1, 0, 0, 0, 0], p.c_d1)
-    C += _rank1([0, 0, 0, -1, 0, 1], p.c_d2)
+    # each disk damper across its segment, but for the share that acts disk to frame
+    s1, s2 = p.frame_share_d1, p.frame_share_d2
+    C += _rank1([-1, 1, 0, 0, 0, 0], p.c_d1 * (1.0 - s1))
+    C += _rank1([0, 0, 0, -1, 0, 1], p.c_d2 * (1.0 - s2))
+    C[1, 1] += p.c_d1 * s1
+    C[3, 3] += p.c_d2 * s2
     # the bolted joint's interface damping, one share per disk face
     C += _rank1([0, -1, 0, 1, 0, 0], p.c_O1 + p.c_O2)
     C[0, 0] += p.c_a

@@ -50,7 +50,9 @@ class RotorParameters:
     c_a, c_b : float
         Bearing damping at A and B, N s/m (3000).
     c_d1, c_d2 : float
-        Shaft (bending) damping of segments A-O1 and O2-B, N s/m (3000).
+        Shaft (bending) damping of segments A-O1 and O2-B, N s/m (3000): on the
+        relative lateral displacement of each disk and its bearing, except the share
+        ``frame_share_d1`` (``frame_share_d2``) that acts from the disk to the frame.
     c_O1, c_O2 : float
         Damping of the two faces of the bolted joint, N s/m (3000); they act in
         parallel on the disks' relative lateral displacement.
@@ -74,6 +76,13 @@ class RotorParameters:
     e_O2 : float or None
         Disk O2's eccentricity, m, where it differs from disk O1's ``e`` (None: ``e``
         for both); with ``beta`` it makes O2's unbalance a vector of its own.
+    frame_share_d1, frame_share_d2 : float
+        Share (0-1) of ``c_d1`` (``c_d2``) acting from disk O1 (O2) to the frame
+        rather than across its shaft segment (0). The paper does not say where its
+        disk dampers act: 0 is the reading of ``docs/rotor_model.md``, 1 an absolute
+        damper at the disk (external damping, as a second derivation and the ROSS
+        model read it). Where it acts moves the journals' 1x phase by tens of
+        per cent, so model updating fits it.
     n_balls : int
         Number of balls Nb (8).
     R_outer, r_inner : float
@@ -120,6 +129,8 @@ class RotorParameters:
     kB_B: float | None = None
     clearance_B: float | None = None
     e_O2: float | None = None
+    frame_share_d1: float = 0.0
+    frame_share_d2: float = 0.0
 
     def __post_init__(self):
         self.validate()
@@ -148,6 +159,10 @@ class RotorParameters:
                 problems.append(f"{name}={v!r} must be None (same as "
                                 f"{_SHARED[name]}) or a finite "
                                 f"{'positive number' if positive_only else 'value >= 0'}")
+        for name in ("frame_share_d1", "frame_share_d2"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
+                problems.append(f"{name}={v!r} must be a share between 0 and 1")
         for name in ("beta", "unbalance_phase"):
             if not math.isfinite(getattr(self, name)):
                 problems.append(f"{name}={getattr(self, name)!r} must be finite (rad)")
