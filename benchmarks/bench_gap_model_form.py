@@ -35,6 +35,7 @@ from plants import families  # noqa: E402
 from plants.families import CHANNELS, SPEEDS, make_family_trial  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
+from sknarx.orders import order_components  # noqa: E402
 from sknarx.rotor import RotorParameters  # noqa: E402
 
 #: (label, family, plant fields changed, model clearance in m or None)
@@ -77,12 +78,17 @@ def run(label, family, plant, model_clearance, seed):
 
 
 def _orders_1x(sweep):
-    """Each step's 1x vector per channel (m, complex), speeds x channels."""
+    """Each step's 1x vector per channel (m, complex, ``x ~ Re(z e^{i Omega t})``),
+    speeds x channels, by the package's least-squares order fit."""
     out = []
     for w in SPEEDS:
         g = sweep[sweep.speed == w]
-        ph = np.exp(-1j * w * g.t.to_numpy())
-        out.append([2 * np.mean(g[c].to_numpy() * ph) for c in CHANNELS])
+        phi = w * g.t.to_numpy()
+        row = []
+        for c in CHANNELS:
+            amp, ph = order_components(g[c].to_numpy(), phi, (1.0,))
+            row.append(amp[0] * np.exp(1j * ph[0]))
+        out.append(row)
     return np.array(out)
 
 
@@ -90,10 +96,10 @@ def nominal_differences():
     """Median relative 1x vector difference of each plant's nominal sweep to sknarx's."""
     from sknarx.rotor import RotorBearingSimulator
 
-    neutral = {"mismatch": {**dict.fromkeys(("k1", "k2", "c_a", "c_b", "c_d1", "c_d2",
-                                             "c_O1", "c_O2", "kB_A", "kB_B", "e_O1",
-                                             "e_O2"), 1.0),
-                            "unbalance_phase": 0.0, "beta_error": 0.0}}
+    # the trials' mismatch with every factor 1 and every angle 0 (its keys from the draw)
+    drawn = families.draw_trial(None, 0, "second")["mismatch"]
+    angles = {"unbalance_phase", "beta_error"}
+    neutral = {"mismatch": {k: 0.0 if k in angles else 1.0 for k in drawn}}
     plants = {f: _orders_1x(families._SWEEP[f][0](neutral, {}, families._SWEEP[f][1]))
               for f in ("second", "ross")}
     out = {}

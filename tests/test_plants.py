@@ -3,8 +3,9 @@
 The plants live in ``benchmarks/plants`` (they are test equipment, not the package):
 a second derivation of the paper's rotor and the ROSS finite-element plant. These
 tests check that each is the rotor it claims to be, that its faults leave their
-signatures, and that the nominal update stays physical on a plant it cannot follow
-(the diagnosis end to end on them: ``test_plants_diagnosis.py``).
+signatures, and that the nominal update stays physical on a plant written from other
+readings of the paper and finds where its dampers act (the diagnosis end to end on
+them: ``test_plants_diagnosis.py``).
 """
 
 import sys

@@ -47,7 +47,8 @@ def test_diagnosis_names_a_rub_on_the_second_derivation():
     assert d["shrink"] >= 0.9 * oracle_shrink
     if names != ["rub"]:
         # known (docs/gap.md, "Blind validation"): where the fitted effect leaves a
-        # model-form residual, misalignment's 1x offset and free 2x take a third of it
+        # model-form residual, misalignment's free 1x force at a journal and its free 2x
+        # take a third of it
         # and the pair rule (pair_gain 0.3) accepts the partner -- measured here with
         # the damper shares in the update: rub leaves 647, rub + misalignment 446
         pytest.xfail(f"the pair rule accepted a partner: {names}")
