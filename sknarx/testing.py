@@ -42,7 +42,7 @@ class LineFrequency(Effect):
     frequency: float = 50.0
     name = "line-frequency"
 
-    def measure(self, table, rng):
+    def measure(self, table, rng, context=None):
         for c in CHANNELS:
             if c in table:
                 table[c] = table[c] + self.amplitude * np.sin(2 * np.pi * self.frequency *

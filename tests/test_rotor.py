@@ -343,8 +343,56 @@ def test_a_soft_pedestal_lets_the_journal_move_more():
         return np.array([order_components(tab[c].to_numpy(), phi, (1,))[0][0]
                          for c in ("xA", "yA")])
 
-    stiff, soft = journal_1x([]), journal_1x([R.SupportAnisotropy(kx=2e6, ky=2e6)])
+    stiff = journal_1x([])
+    soft = journal_1x([R.SupportAnisotropy(kx=2e6, ky=2e6, probes="frame")])
     assert np.all(soft > 1.2 * stiff)
+    # probes in the housings move with it: they read far less than the journal's motion
+    relative = journal_1x([R.SupportAnisotropy(kx=2e6, ky=2e6)])
+    assert np.all(relative < 0.5 * stiff)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(kh=st.floats(1e6, 1e9), kp=st.floats(1e6, 1e9), mass=st.floats(0.0, 40.0),
+       damping=st.floats(0.0, 2e4), omega=st.floats(80.0, 280.0),
+       phase=st.floats(-np.pi, np.pi), mean=st.floats(-1e-4, 1e-4))
+def test_housing_probes_read_the_journal_relative_to_its_housing(kh, kp, mass, damping,
+                                                                 omega, phase, mean):
+    """A journal moving ``X e^{i w t}`` moves its housing by ``kh / (kh + s) X`` (the
+    contact and the pedestal ``s = kp - m w^2 + i c w`` in series): a housing-mounted
+    probe reads ``s / (kh + s) X`` at 1x, and the static part by ``kp / (kh + kp)``; a
+    frame-mounted one reads the journal unchanged. Only the journal channels change."""
+    from types import SimpleNamespace
+
+    from sknarx.orders import order_components
+
+    ctx = SimpleNamespace(bearing_stiffness=(np.eye(2) * kh, np.eye(2) * kh),
+                          q_static=np.zeros(12))
+    fs, n = 1000.0, 1000
+    t = np.arange(n) / fs
+    phi = omega * t
+    X = 1e-5 * np.exp(1j * phase)
+    journal = mean + (X * np.exp(1j * phi)).real
+    table = {"speed": np.full(n, omega), "t": t, "phi": phi, "xA": journal.copy(),
+             "yB": journal.copy(), "xO1": journal.copy()}
+    eff = R.SupportAnisotropy(kx=kp, ky=kp, mass=mass, damping=damping)
+    out = eff.measure(dict(table), None, context=ctx)
+    s = kp - mass * omega**2 + 1j * damping * omega
+    for ch in ("xA", "yB"):
+        amp, ang = order_components(out[ch], phi, (1,))
+        got = amp[0] * np.exp(1j * ang[0])
+        assert abs(got - s / (kh + s) * X) <= 1e-3 * abs(X)
+        whole = phi < 2 * np.pi * np.floor(phi[-1] / (2 * np.pi))  # whole revolutions
+        assert out[ch][whole].mean() == pytest.approx(mean * kp / (kh + kp),
+                                                      abs=1e-3 * abs(X))
+    np.testing.assert_array_equal(out["xO1"], journal)
+    framed = R.SupportAnisotropy(kx=kp, ky=kp, mass=mass, damping=damping, probes="frame")
+    np.testing.assert_array_equal(framed.measure(dict(table), None, context=ctx)["xA"],
+                                  journal)
+
+
+def test_housing_probes_need_a_known_mounting():
+    with pytest.raises(ValueError, match="probes='shaft' is not one of housing, frame"):
+        R.SupportAnisotropy(probes="shaft")
 
 
 def test_each_bearing_and_each_disk_can_have_its_own_values():

@@ -38,6 +38,7 @@ class _Setup:
     kernel: object
     kparams: np.ndarray
     q_static: np.ndarray
+    context: object  # the EffectContext the effects were given (their measure sees it too)
 
 
 class RotorBearingSimulator:
@@ -141,7 +142,8 @@ class RotorBearingSimulator:
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
-                      brg=brg, kernel=kernel, kparams=kparams, q_static=q_static)
+                      brg=brg, kernel=kernel, kparams=kparams, q_static=q_static,
+                      context=ctx)
 
     def linear_model(self) -> LinearRotorModel:
         """The rotor with its bearings linearised about the static equilibrium."""
@@ -309,8 +311,9 @@ class RotorBearingSimulator:
         """The first ``n`` samples of each column, as the measurement effects record them."""
         columns = {name: values[:n] for name, values in columns.items()}
         rng = np.random.default_rng([self.seed, int(round(speed * 1e6))])
+        ctx = self._setup.context
         for eff in self.effects:
-            columns = eff.measure(columns, rng)
+            columns = eff.measure(columns, rng, context=ctx)
         return columns
 
     def simulate(self, omega, fs=1000.0, n_samples=8192, settle=2.0, substeps=None):
