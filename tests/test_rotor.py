@@ -308,26 +308,30 @@ def test_run_up_input_is_checked():
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(kh=st.floats(1e6, 1e9), kp=st.floats(1e6, 1e9), mass=st.floats(0.0, 40.0),
        damping=st.floats(0.0, 2e4), omega=st.floats(10.0, 400.0),
-       phase=st.floats(-np.pi, np.pi))
-def test_the_pedestal_is_in_series_with_the_contact(kh, kp, mass, damping, omega, phase):
+       phase=st.floats(-np.pi, np.pi), ca=st.sampled_from([0.0, 1050.0]))
+def test_the_pedestal_is_in_series_with_the_bearing(kh, kp, mass, damping, omega, phase,
+                                                    ca):
     """The anisotropy's force on a journal moving harmonically at the running speed is
-    ``D x`` with ``D = kh^2 / (kh + kp - m w^2 + i c w)``: added to the contact's
-    ``-kh x`` it leaves the series stiffness ``kh s / (kh + s)`` -- a softer support, never
-    a stiffer one (the kernel once added ``-D x`` and stiffened it)."""
+    ``D x`` with ``D = z^2 / (z + kp - m w^2 + i c w)``, ``z = kh + i ca w`` (the
+    contact and the bearing damper in parallel): added to the bearing's ``-z x`` it
+    leaves the series stiffness ``z s / (z + s)`` -- a softer support, never a stiffer
+    one (the kernel once added ``-D x`` and stiffened it), and the bearing damper moves
+    from the frame to the housing with the contact (both independent plants' reading)."""
     from types import SimpleNamespace
 
     eff = R.SupportAnisotropy(kx=kp, ky=kp, mass=mass, damping=damping)
     ctx = SimpleNamespace(bearing_stiffness=(np.eye(2) * kh, np.eye(2) * kh),
-                          q_static=np.zeros(12))
+                          q_static=np.zeros(12), params=R.RotorParameters(c_a=ca, c_b=ca))
     kernel, p = eff.force_kernel(ctx)
     X = 1e-5 * np.exp(1j * phase)
     q, v, out = np.zeros(12), np.zeros(12), np.zeros(12)
     q[0], v[0] = X.real, (1j * omega * X).real
     kernel(0.0, 0.0, omega, 0.0, q, v, p, out)
     s = kp - mass * omega**2 + 1j * damping * omega
-    D = kh**2 / (kh + s)
-    assert out[0] == pytest.approx((D * X).real, rel=1e-9, abs=1e-12 * abs(D * X))
-    if mass == 0.0 and damping == 0.0:
+    z = kh + 1j * ca * omega
+    D = z**2 / (z + s)
+    assert out[0] == pytest.approx((D * X).real, rel=1e-9, abs=1e-12 * abs(z * X))
+    if mass == 0.0 and damping == 0.0 and ca == 0.0:
         assert 0.0 < kh - out[0] / X.real <= kh  # the series spring is softer
     assert out[1] == 0.0 or abs(out[1]) < 1e-300  # y at rest: no force
 
@@ -357,16 +361,18 @@ def test_a_soft_pedestal_lets_the_journal_move_more():
        phase=st.floats(-np.pi, np.pi), mean=st.floats(-1e-4, 1e-4))
 def test_housing_probes_read_the_journal_relative_to_its_housing(kh, kp, mass, damping,
                                                                  omega, phase, mean):
-    """A journal moving ``X e^{i w t}`` moves its housing by ``kh / (kh + s) X`` (the
-    contact and the pedestal ``s = kp - m w^2 + i c w`` in series): a housing-mounted
-    probe reads ``s / (kh + s) X`` at 1x, and the static part by ``kp / (kh + kp)``; a
-    frame-mounted one reads the journal unchanged. Only the journal channels change."""
+    """A journal moving ``X e^{i w t}`` moves its housing by ``z / (z + s) X`` (the
+    bearing ``z = kh + i ca w`` and the pedestal ``s = kp - m w^2 + i c w`` in series): a
+    housing-mounted probe reads ``s / (z + s) X`` at 1x, and the static part by
+    ``kp / (kh + kp)``; a frame-mounted one reads the journal unchanged. Only the journal
+    channels change."""
     from types import SimpleNamespace
 
     from sknarx.orders import order_components
 
+    ca = 1050.0  # the bearing damper, in parallel with the contact
     ctx = SimpleNamespace(bearing_stiffness=(np.eye(2) * kh, np.eye(2) * kh),
-                          q_static=np.zeros(12))
+                          q_static=np.zeros(12), params=R.RotorParameters(c_a=ca, c_b=ca))
     fs, n = 1000.0, 1000
     t = np.arange(n) / fs
     phi = omega * t
@@ -380,7 +386,7 @@ def test_housing_probes_read_the_journal_relative_to_its_housing(kh, kp, mass, d
     for ch in ("xA", "yB"):
         amp, ang = order_components(out[ch], phi, (1,))
         got = amp[0] * np.exp(1j * ang[0])
-        assert abs(got - s / (kh + s) * X) <= 1e-3 * abs(X)
+        assert abs(got - s / (kh + 1j * ca * omega + s) * X) <= 1e-3 * abs(X)
         whole = phi < 2 * np.pi * np.floor(phi[-1] / (2 * np.pi))  # whole revolutions
         assert out[ch][whole].mean() == pytest.approx(mean * kp / (kh + kp),
                                                       abs=1e-3 * abs(X))

@@ -444,24 +444,28 @@ class JointLooseness(Effect):
 
 @njit(nogil=True, cache=True)
 def _support_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
-    # each pedestal in series with its contact, about the static equilibrium: per
-    # bearing and direction the contact's tangent stiffness kh, the pedestal's static
+    # each pedestal in series with its bearing, about the static equilibrium: per
+    # bearing and direction the contact's tangent stiffness kh, the bearing damper ca
+    # (in parallel with the contact, journal to housing), the pedestal's static
     # stiffness kp, and (shared by both directions) its mass m and damping c. At the
-    # running speed w the pedestal's dynamic stiffness is s = kp - m w^2 + i c w and the
-    # series stiffness kh s / (kh + s) = kh - D with D = kh^2 / (kh + s): the force
-    # D x on the journal takes D's real part as a softening stiffness and its imaginary
-    # part, over w, as a damping (exact for the synchronous response)
+    # running speed w the bearing's dynamic stiffness is z = kh + i ca w, the pedestal's
+    # s = kp - m w^2 + i c w, and their series stiffness z s / (z + s) = z - D with
+    # D = z^2 / (z + s): the force D x on the journal takes D's real part as a softening
+    # stiffness and its imaginary part, over w, as a damping (exact for the synchronous
+    # response; the nominal model holds z x, from the frame)
     for b in range(2):
-        o = 8 * b
-        m, c = p[o + 6], p[o + 7]
+        o = 9 * b
+        m, c, ca = p[o + 6], p[o + 7], p[o + 8]
         for d in range(2):
             i = int(p[o + d])
             kh, kp = p[o + 2 + 2 * d], p[o + 3 + 2 * d]
-            sr = kh + kp - m * omega * omega
-            si = c * omega
-            den = sr * sr + si * si
-            x = q[i] - p[16 + 2 * b + d]
-            out[i] += kh * kh * (sr * x - c * v[i]) / den
+            z = complex(kh, ca * omega)
+            D = z * z / (z + complex(kp - m * omega * omega, c * omega))
+            x = q[i] - p[18 + 2 * b + d]
+            f = D.real * x
+            if omega > 0.0:
+                f += D.imag / omega * v[i]
+            out[i] += f
 
 
 @dataclass(repr=False)
@@ -469,19 +473,21 @@ class SupportAnisotropy(Effect):
     """Flexible, anisotropic foundation: pedestals of stiffness ``kx``, ``ky`` (N/m),
     with the housing's ``mass`` (kg) and ``damping`` (N s/m), at both bearings.
 
-    Each bearing sits on a pedestal in series with its Hertzian contact. With the
-    contact's tangent stiffness ``k_H`` (at the static equilibrium) and the pedestal's
-    dynamic stiffness at the running speed, ``s = k_p - m Omega^2 + i c Omega``, the
-    series stiffness is ``k_H s / (k_H + s)``; the effect adds the difference,
-    ``-k_H^2 / (k_H + s)`` per direction, as a linear force about the static
-    equilibrium: a softer support, and through the housing's mass and damping a
-    support resonance of its own (at ``sqrt((k_H + k_p) / m)``) that lowers and damps
-    it further as the speed rises. Exact for the synchronous response; harmonics see the
-    synchronous value. With ``mass = damping = 0`` the massless series spring.
+    Each bearing -- its Hertzian contact and, in parallel with it, its damper
+    (``c_a``, ``c_b``: the bearing's dynamic stiffness ``z = k_H + i c_a Omega``, with
+    the contact's tangent stiffness ``k_H`` at the static equilibrium) -- sits on a
+    pedestal of dynamic stiffness ``s = k_p - m Omega^2 + i c Omega`` at the running
+    speed. The series stiffness is ``z s / (z + s)``; the effect adds the difference,
+    ``-z^2 / (z + s)`` per direction, as a linear force about the static equilibrium
+    (the nominal model holds the bearing, ``z``, against the frame): a softer support,
+    and through the housing's mass and damping a support resonance of its own (at
+    ``sqrt((k_H + k_p) / m)``) that lowers and damps it further as the speed rises.
+    Exact for the synchronous response; harmonics see the synchronous value. With
+    ``mass = damping = 0`` the massless series spring.
 
     Where the journal probes are fixed matters as soon as the housing moves:
     ``probes='housing'`` (proximity probes mounted in the bearing housing, the usual
-    arrangement) read the journal relative to its housing, ``s / (k_H + s)`` of the
+    arrangement) read the journal relative to its housing, ``s / (z + s)`` of the
     journal's motion per direction; ``probes='frame'`` read it against the frame. The
     disk probes always read against the frame. Like the force, the reading is exact
     for the synchronous response: its in-phase part scales the record, its quadrature
@@ -512,18 +518,22 @@ class SupportAnisotropy(Effect):
                              f"{', '.join(self.PROBES)}.")
 
     def _contacts(self, context):
-        """Per bearing, the journal's x and y DOF indices and the contact's tangent
-        stiffness in each direction (N/m)."""
+        """Per bearing, the journal's x and y DOF indices, the contact's tangent
+        stiffness in each direction (N/m) and the bearing damper (N s/m) that acts with
+        it between journal and housing."""
+        params = getattr(context, "params", None)
+        dampers = (0.0, 0.0) if params is None else (params.c_a, params.c_b)
         out = []
-        for (ix, iy), KH in zip(((0, 1), (10, 11)), context.bearing_stiffness, strict=True):
+        for (ix, iy), KH, ca in zip(((0, 1), (10, 11)), context.bearing_stiffness, dampers,
+                                    strict=True):
             kh = np.diag(KH)
-            out.append(((ix, iy), (float(kh[0]), float(kh[1]))))
+            out.append(((ix, iy), (float(kh[0]), float(kh[1])), float(ca)))
         return out
 
     def force_kernel(self, context):
         vals, static = [], []
-        for (ix, iy), (khx, khy) in self._contacts(context):
-            vals += [ix, iy, khx, self.kx, khy, self.ky, self.mass, self.damping]
+        for (ix, iy), (khx, khy), ca in self._contacts(context):
+            vals += [ix, iy, khx, self.kx, khy, self.ky, self.mass, self.damping, ca]
             static += [context.q_static[ix], context.q_static[iy]]
         return _support_kernel, np.array(vals + static, dtype=float)
 
@@ -536,15 +546,15 @@ class SupportAnisotropy(Effect):
         w = np.asarray(table["speed"], dtype=float)
         t = np.asarray(table["t"], dtype=float)
         whole = _whole_revolutions(np.asarray(table["phi"], dtype=float))
-        for (ix, iy), (khx, khy) in self._contacts(context):
+        for (ix, iy), (khx, khy), ca in self._contacts(context):
             for i, kh, kp in ((ix, khx, self.kx), (iy, khy, self.ky)):
                 ch = DOF_NAMES[i]
                 if ch not in table:
                     continue
                 x = np.asarray(table[ch], dtype=float)
-                # the housing follows the journal by k_H / (k_H + s); the probe reads the rest
+                # the housing follows the journal by z / (z + s); the probe reads the rest
                 s = kp - self.mass * w * w + 1j * self.damping * w
-                g = s / (kh + s)
+                g = s / (kh + 1j * ca * w + s)
                 mean = x[whole].mean()
                 ac = x - mean
                 table[ch] = (mean * kp / (kh + kp) + g.real * ac
