@@ -35,23 +35,26 @@ def _diagnose_family_trial(kind, seed, family, candidates):
 
 
 @pytest.mark.slow
-def test_diagnosis_names_a_rub_on_the_second_derivation():
-    # end to end on the independent plant (its own rub after Muszynska, its housings,
-    # its reading of the paper), against a library that includes the second plant's
-    # usual pair partner (misalignment). Seed 7001 is the benchmark's rub (named alone
-    # on 09ba3c7 and 8e971ee); not every rub on this plant is (docs/gap.md)
-    d, oracle_shrink = _diagnose_family_trial("rub", 7001, "second",
-                                              ["rub", "misalignment"])
-    names = [d["verdict"]] if isinstance(d["verdict"], str) else d["verdict"]
-    assert "rub" in names, d["ranking"][:2]
+def test_diagnosis_names_per_probe_runout_on_the_second_derivation():
+    # end to end on the independent plant (its housings, its reading of the paper, the
+    # families' measurement chain): the benchmark's runout 7013, each probe its own
+    # slow-roll vector. (The second plant's rub 7001, pinned here until 2953d1d, took
+    # 140 s and is named rub + misalignment -- the pair rule accepts misalignment's free
+    # 2x on the rub's model-form residual; it is the blind benchmark's to score.)
+    import numpy as np
+
+    d, oracle_shrink = _diagnose_family_trial("runout", 7013, "second",
+                                              ["runout", "speed-fluctuation"])
+    assert d["verdict"] == "runout", d["ranking"][:2]
     assert d["shrink"] >= 0.9 * oracle_shrink
-    if names != ["rub"]:
-        # known (docs/gap.md, "Blind validation"): where the fitted effect leaves a
-        # model-form residual, misalignment's free 1x force at a journal and its free 2x
-        # take a third of it
-        # and the pair rule (pair_gain 0.3) accepts the partner -- measured here with
-        # the damper shares in the update: rub leaves 647, rub + misalignment 446
-        pytest.xfail(f"the pair rule accepted a partner: {names}")
+    _, truth, _, _ = make_family_trial("runout", 7013, "second")
+    fit = next(r for r in d["ranking"] if r["effect"] == "runout")["params"]
+    for ch, (amp, phase, _, _) in truth["effects"]["runout"].items():
+        got = fit[ch]["1x_m"] * np.exp(1j * np.radians(fit[ch]["1x_deg"]))
+        err = abs(got - amp * np.exp(1j * phase)) / amp
+        # measured on 2953d1d: journals 0.01-0.04; disks 0.24 (xO1) and 0.19 (yO1), where
+        # the plant's disk 1x differs in form from the updated model's
+        assert err < (0.1 if ch[1:] in ("A", "B") else 0.35), (ch, err)
 
 
 @pytest.mark.slow
