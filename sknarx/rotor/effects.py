@@ -566,9 +566,10 @@ def _whole_revolutions(phi):
     """Mask of the samples in the record's whole revolutions from its start (all of
     them when it holds less than one): the mean over it is the static part of a
     steady periodic record, free of the last part-revolution's bias."""
-    turns = np.floor((phi - phi[0]) / (2.0 * np.pi)) if phi.size else phi
-    n = turns[-1] if phi.size else 0
-    return turns < n if n >= 1 else np.ones(phi.shape, dtype=bool)
+    if phi.size == 0:
+        return np.ones(0, dtype=bool)
+    turns = np.floor((phi - phi[0]) / (2.0 * np.pi))
+    return turns < turns[-1] if turns[-1] >= 1 else np.ones(phi.shape, dtype=bool)
 
 
 def _time_derivative(x, t):
