@@ -121,10 +121,12 @@ def _own_sweep(truth, physical, settle, plant=None):
         elif name == "clearance":
             effects.append(EFFECTS[name](clearance=p["clearance"]))
         elif name == "anisotropy":
-            # sknarx's support: series stiffness per direction (no pedestal mass)
+            # sknarx's pedestals: the other two plants' housings (15 kg, 5 % damping of
+            # the soft pedestal's housing mode), the stiff direction as ROSS's
             stiff = 1e9
             kx, ky = (p["soft"], stiff) if p["soft_axis"] == "x" else (stiff, p["soft"])
-            effects.append(EFFECTS[name](kx=kx, ky=ky))
+            effects.append(EFFECTS[name](kx=kx, ky=ky, mass=15.0,
+                                         damping=0.1 * np.sqrt(p["soft"] * 15.0)))
         elif name == "speed-fluctuation":
             effects.append(EFFECTS[name](amplitude=p["amplitude"],
                                          frequency=p["frequency_hz"]))

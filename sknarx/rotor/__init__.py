@@ -16,6 +16,7 @@ from .effects import (
 from .linear import LinearRotorModel
 from .matrices import RotorMatrices, assemble
 from .parameters import DOF_NAMES, RotorParameters
+from .pedestals import HOUSING_NAMES, Pedestals
 from .simulator import RotorBearingSimulator, SimulationDivergenceError
 from .sweep_table import load_sweep, save_sweep
 
@@ -24,6 +25,8 @@ __all__ = [
     "SimulationDivergenceError",
     "RotorParameters",
     "DOF_NAMES",
+    "HOUSING_NAMES",
+    "Pedestals",
     "RotorMatrices",
     "assemble",
     "LinearRotorModel",

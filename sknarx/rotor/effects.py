@@ -28,6 +28,7 @@ from numba import njit
 
 from .integrator import no_extra_force
 from .parameters import DOF_NAMES
+from .pedestals import HOUSING_NAMES, Pedestals
 
 __all__ = [
     "Effect",
@@ -92,6 +93,15 @@ class Effect:
         ``kernel(t, phi, omega, alpha, q, v, p, out)`` that adds its generalised
         forces (N, N m) to ``out`` from the state ``q`` (m, rad) and ``v``, and the
         float array ``p`` it reads (DOF indices first).
+        """
+        return None
+
+    def pedestals(self):
+        """The bearing housings this effect mounts on pedestals, or ``None``.
+
+        Returns a :class:`~sknarx.rotor.pedestals.Pedestals`: the simulator adds each
+        housing's two DOFs (``HOUSING_NAMES``) and puts the ball contact and the bearing
+        damper between journal and housing. At most one effect of a simulator may.
         """
         return None
 
@@ -442,56 +452,25 @@ class JointLooseness(Effect):
                                             self.gap])
 
 
-@njit(nogil=True, cache=True)
-def _support_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
-    # each pedestal in series with its bearing, about the static equilibrium: per
-    # bearing and direction the contact's tangent stiffness kh, the bearing damper ca
-    # (in parallel with the contact, journal to housing), the pedestal's static
-    # stiffness kp, and (shared by both directions) its mass m and damping c. At the
-    # running speed w the bearing's dynamic stiffness is z = kh + i ca w, the pedestal's
-    # s = kp - m w^2 + i c w, and their series stiffness z s / (z + s) = z - D with
-    # D = z^2 / (z + s): the force D x on the journal takes D's real part as a softening
-    # stiffness and its imaginary part, over w, as a damping (exact for the synchronous
-    # response; the nominal model holds z x, from the frame)
-    for b in range(2):
-        o = 9 * b
-        m, c, ca = p[o + 6], p[o + 7], p[o + 8]
-        for d in range(2):
-            i = int(p[o + d])
-            kh, kp = p[o + 2 + 2 * d], p[o + 3 + 2 * d]
-            z = complex(kh, ca * omega)
-            D = z * z / (z + complex(kp - m * omega * omega, c * omega))
-            x = q[i] - p[18 + 2 * b + d]
-            f = D.real * x
-            if omega > 0.0:
-                f += D.imag / omega * v[i]
-            out[i] += f
-
-
 @dataclass(repr=False)
 class SupportAnisotropy(Effect):
-    """Flexible, anisotropic foundation: pedestals of stiffness ``kx``, ``ky`` (N/m),
-    with the housing's ``mass`` (kg) and ``damping`` (N s/m), at both bearings.
+    """Flexible, anisotropic foundation: each bearing's housing, of ``mass`` (kg), on a
+    pedestal of stiffness ``kx``, ``ky`` (N/m) and ``damping`` (N s/m, both directions).
 
-    Each bearing -- its Hertzian contact and, in parallel with it, its damper
-    (``c_a``, ``c_b``: the bearing's dynamic stiffness ``z = k_H + i c_a Omega``, with
-    the contact's tangent stiffness ``k_H`` at the static equilibrium) -- sits on a
-    pedestal of dynamic stiffness ``s = k_p - m Omega^2 + i c Omega`` at the running
-    speed. The series stiffness is ``z s / (z + s)``; the effect adds the difference,
-    ``-z^2 / (z + s)`` per direction, as a linear force about the static equilibrium
-    (the nominal model holds the bearing, ``z``, against the frame): a softer support,
-    and through the housing's mass and damping a support resonance of its own (at
-    ``sqrt((k_H + k_p) / m)``) that lowers and damps it further as the speed rises.
-    Exact for the synchronous response; harmonics see the synchronous value. With
-    ``mass = damping = 0`` the massless series spring.
+    The simulator adds the two housings' DOFs (:mod:`sknarx.rotor.pedestals`): the
+    Hertzian ball contact and the bearing damper (``c_a``, ``c_b``) act between journal
+    and housing, the pedestal between housing and frame. The contact stays nonlinear:
+    a journal orbiting about its static sag unloads and stiffens the contact every
+    revolution, and what a soft pedestal takes depends on that orbit -- a linear series
+    spring about the static sag overstated it up to sevenfold at a bearing whose orbit
+    exceeds its sag (``docs/gap.md``). The housing's mass gives the support a resonance
+    of its own, near ``sqrt((k_H + k_p) / mass)``.
 
     Where the journal probes are fixed matters as soon as the housing moves:
     ``probes='housing'`` (proximity probes mounted in the bearing housing, the usual
-    arrangement) read the journal relative to its housing, ``s / (z + s)`` of the
-    journal's motion per direction; ``probes='frame'`` read it against the frame. The
-    disk probes always read against the frame. Like the force, the reading is exact
-    for the synchronous response: its in-phase part scales the record, its quadrature
-    part scales the record's time derivative over the speed.
+    arrangement) read the journal minus its housing; ``probes='frame'`` read it against
+    the frame. The disk probes always read against the frame. The housings' own
+    displacements are not recorded columns.
 
     Signature: the critical speed splits into a horizontal and a vertical one;
     elliptical orbits, x and y 1x amplitudes peak at different speeds.
@@ -499,14 +478,16 @@ class SupportAnisotropy(Effect):
 
     kx: float = 5e6
     ky: float = 2e7
-    mass: float = 0.0
+    mass: float = 10.0
     damping: float = 0.0
     probes: str = "housing"
     name = "anisotropy"
-    bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log"), "mass": (0.0, 40.0, "lin"),
+    # a housing has mass: the lower bound keeps its mode within a few times the
+    # rotor's fastest one (the integration step follows it)
+    bounds = {"kx": (1e6, 1e9, "log"), "ky": (1e6, 1e9, "log"), "mass": (2.0, 40.0, "lin"),
               "damping": (0.0, 2e4, "lin")}
-    #: a calibration starts from the massless, undamped pedestal
-    start = {"mass": 0.0, "damping": 0.0}
+    #: a calibration starts from an undamped pedestal under a housing of middling mass
+    start = {"mass": 10.0, "damping": 0.0}
     #: where the journal probes are fixed (a rig fact, not searched)
     PROBES = ("housing", "frame")
     units = {"kx": "N/m", "ky": "N/m", "mass": "kg", "damping": "N s/m", "probes": ""}
@@ -516,71 +497,23 @@ class SupportAnisotropy(Effect):
         if self.probes not in self.PROBES:
             raise ValueError(f"SupportAnisotropy: probes={self.probes!r} is not one of "
                              f"{', '.join(self.PROBES)}.")
+        self.pedestals()  # the values' checks, named
 
-    def _contacts(self, context):
-        """Per bearing, the journal's x and y DOF indices, the contact's tangent
-        stiffness in each direction (N/m) and the bearing damper (N s/m) that acts with
-        it between journal and housing."""
-        params = getattr(context, "params", None)
-        dampers = (0.0, 0.0) if params is None else (params.c_a, params.c_b)
-        out = []
-        for (ix, iy), KH, ca in zip(((0, 1), (10, 11)), context.bearing_stiffness, dampers,
-                                    strict=True):
-            kh = np.diag(KH)
-            out.append(((ix, iy), (float(kh[0]), float(kh[1])), float(ca)))
-        return out
-
-    def force_kernel(self, context):
-        vals, static = [], []
-        for (ix, iy), (khx, khy), ca in self._contacts(context):
-            vals += [ix, iy, khx, self.kx, khy, self.ky, self.mass, self.damping, ca]
-            static += [context.q_static[ix], context.q_static[iy]]
-        return _support_kernel, np.array(vals + static, dtype=float)
+    def pedestals(self):
+        return Pedestals(mass=float(self.mass), stiffness=(float(self.kx), float(self.ky)),
+                         damping=(float(self.damping), float(self.damping)))
 
     def measure(self, table, rng, context=None):
-        if self.probes == "frame":
-            return table
-        if context is None:
-            raise ValueError("SupportAnisotropy with probes='housing' needs the simulator's "
-                             "EffectContext (the contacts' stiffness) to measure.")
-        w = np.asarray(table["speed"], dtype=float)
-        t = np.asarray(table["t"], dtype=float)
-        whole = _whole_revolutions(np.asarray(table["phi"], dtype=float))
-        for (ix, iy), (khx, khy), ca in self._contacts(context):
-            for i, kh, kp in ((ix, khx, self.kx), (iy, khy, self.ky)):
-                ch = DOF_NAMES[i]
-                if ch not in table:
-                    continue
-                x = np.asarray(table[ch], dtype=float)
-                # the housing follows the journal by z / (z + s); the probe reads the rest
-                s = kp - self.mass * w * w + 1j * self.damping * w
-                g = s / (kh + 1j * ca * w + s)
-                mean = x[whole].mean()
-                ac = x - mean
-                table[ch] = (mean * kp / (kh + kp) + g.real * ac
-                             + g.imag * _time_derivative(ac, t) / w)
+        housings = [name for name in HOUSING_NAMES if name in table]
+        if self.probes == "housing":
+            for name in housings:
+                # xHA -> xA: the journal read from its own housing
+                journal = name[0] + name[2]
+                if journal in table:
+                    table[journal] = np.asarray(table[journal]) - np.asarray(table[name])
+        for name in housings:
+            table.pop(name)
         return table
-
-
-def _whole_revolutions(phi):
-    """Mask of the samples in the record's whole revolutions from its start (all of
-    them when it holds less than one): the mean over it is the static part of a
-    steady periodic record, free of the last part-revolution's bias."""
-    if phi.size == 0:
-        return np.ones(0, dtype=bool)
-    turns = np.floor((phi - phi[0]) / (2.0 * np.pi))
-    return turns < turns[-1] if turns[-1] >= 1 else np.ones(phi.shape, dtype=bool)
-
-
-def _time_derivative(x, t):
-    """d x / d t of a uniformly sampled record: fourth-order central differences inside
-    (0.02 % low at 1x of 276 rad/s sampled at 1 kHz; second order is 1.3 % low), second
-    order at the two samples at each end."""
-    h = float(t[1] - t[0]) if t.size > 1 else 1.0
-    d = np.gradient(x, h)
-    if x.size >= 5:
-        d[2:-2] = (x[:-4] - 8.0 * x[1:-3] + 8.0 * x[3:-1] - x[4:]) / (12.0 * h)
-    return d
 
 
 def compose_force_kernels(kernels):

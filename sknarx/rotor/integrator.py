@@ -2,7 +2,8 @@
 
 The right-hand side is the rotor's linear part ``M^-1 (F - (C + Omega G) v - K q)``
 plus three nonlinear/forcing contributions: unbalance (with the angular
-acceleration term of a speed profile), gravity and the two ball bearings. Any
+acceleration term of a speed profile), gravity and the two ball bearings (against
+the frame, or between journal and housing when the rotor has pedestals). Any
 further physics enters through ONE hook, ``extra_force(t, phi, omega, alpha, q, v,
 params, out)``, a numba-compiled function that adds generalised forces to
 ``out``; effects (rub, crack, misalignment, looseness...) are composed into such a
@@ -45,9 +46,17 @@ def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
     expo, nb, cr = brg[2], int(brg[3]), brg[4]
     for b in range(2):
         ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
-        # bearing A's contact stiffness and clearance at 0, 1; bearing B's at 9, 10
+        # bearing A's contact stiffness and clearance at 0, 1; bearing B's at 9, 10;
+        # the housings' DOFs at 11-14 (-1: held by the frame)
         kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
-        fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, expo, nb, cr)
+        hx, hy = int(brg[11 + 2 * b]), int(brg[12 + 2 * b])
+        if hx >= 0:
+            # the contact between journal and housing, the reaction on the housing
+            fx, fy = bearing_force(q[ix] - q[hx], q[iy] - q[hy], phi, kB, gamma, expo, nb, cr)
+            f[hx] -= fx
+            f[hy] -= fy
+        else:
+            fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, expo, nb, cr)
         f[ix] += fx
         f[iy] += fy
     extra(t, phi, w, al, q, v, eparams, f)

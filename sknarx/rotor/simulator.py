@@ -17,6 +17,7 @@ from .integrator import integrate
 from .linear import LinearRotorModel, bearing_stiffness
 from .matrices import DOF_INDEX, assemble
 from .parameters import DOF_NAMES, RotorParameters
+from .pedestals import HOUSING_NAMES, bearing_dofs, with_pedestals
 from .sweep_table import SweepStore
 
 __all__ = ["RotorBearingSimulator", "SimulationDivergenceError"]
@@ -97,8 +98,41 @@ class RotorBearingSimulator:
         return p
 
     @cached_property
+    def pedestals(self):
+        """The bearing housings' pedestals an effect mounts the bearings on, or ``None``
+        (bearings held by the frame: 12 DOF)."""
+        found = [(e, ped) for e in self.effects if (ped := e.pedestals()) is not None]
+        if len(found) > 1:
+            raise ValueError("Only one effect may mount the bearings on pedestals; got "
+                             + ", ".join(e.name for e, _ in found) + ".")
+        return found[0][1] if found else None
+
+    @cached_property
     def matrices(self):
-        return assemble(self.effective_params)
+        """Mass, damping, gyroscopic and stiffness matrices (SI), 12 DOF or, with
+        pedestals, 16 (``DOF_NAMES`` then ``HOUSING_NAMES``); bearings not included."""
+        m = assemble(self.effective_params)
+        if self.pedestals is not None:
+            m = with_pedestals(m, self.effective_params, self.pedestals)
+        return m
+
+    @property
+    def dof_names(self):
+        """Names of the integrated DOFs, in order."""
+        return DOF_NAMES + HOUSING_NAMES[: self.matrices.M.shape[0] - len(DOF_NAMES)]
+
+    def _bearings(self):
+        """Per bearing: name, journal ``(x, y)`` DOFs, housing DOFs or ``(-1, -1)``."""
+        return [(which, journal, housing) for which, (journal, housing)
+                in zip("AB", bearing_dofs(self.matrices.M.shape[0]), strict=True)]
+
+    @staticmethod
+    def _relative(q, journal, housing):
+        """The journal's displacement in its bearing (relative to the housing, if any)."""
+        x, y = q[journal[0]], q[journal[1]]
+        if housing[0] >= 0:
+            x, y = x - q[housing[0]], y - q[housing[1]]
+        return x, y
 
     def static_equilibrium(self) -> np.ndarray:
         """Displacements (m, rad) at rest under gravity, bearings included."""
@@ -107,14 +141,26 @@ class RotorBearingSimulator:
     def _static(self):
         p, m = self.effective_params, self.matrices
 
+        bearings = self._bearings()
+
         def residual(q):
             f = m.gravity_force - m.K @ q
-            f[[0, 1]] += bearing_force_py(q[0], q[1], 0.0, p, "A")
-            f[[10, 11]] += bearing_force_py(q[10], q[11], 0.0, p, "B")
+            for which, journal, housing in bearings:
+                fb = bearing_force_py(*self._relative(q, journal, housing), 0.0, p, which)
+                f[list(journal)] += fb
+                if housing[0] >= 0:
+                    f[list(housing)] -= fb
             return f
 
-        guess = np.zeros(12)
+        guess = np.zeros(m.M.shape[0])
         guess[[1, 3, 7, 11]] = -(max(p.clearance, p.resolved("clearance_B")) + 2e-5)
+        if self.pedestals is not None:
+            # each pedestal carries half the rotor's weight and its housing's
+            load = 0.5 * np.sum(np.abs(m.gravity_force[: len(DOF_NAMES)]))
+            sag = -(load + self.pedestals.mass * p.gravity) / self.pedestals.stiffness[1]
+            for *_, housing in bearings:
+                guess[housing[1]] = sag
+            guess[[1, 3, 7, 11]] += sag
         sol = root(residual, guess, method="hybr", options={"xtol": 1e-14})
         scale = max(np.max(np.abs(m.gravity_force)), 1.0)
         if np.max(np.abs(residual(sol.x))) > 1e-8 * scale:
@@ -132,13 +178,16 @@ class RotorBearingSimulator:
         unb = np.array([[p.m_O1 * p.e, ph, DOF_INDEX["xO1"], DOF_INDEX["yO1"]],
                         [p.m_O2 * p.resolved("e_O2"), p.beta + ph, DOF_INDEX["xO2"],
                          DOF_INDEX["yO2"]]])
-        # bearing A's contact stiffness and clearance first, bearing B's last
+        # bearing A's contact stiffness and clearance first, bearing B's next, then the
+        # housings' DOFs (-1: the bearing is held by the frame)
+        bearings = self._bearings()
         brg = np.array([p.kB, p.clearance, p.hertz_exponent, p.n_balls, p.cage_ratio,
                         DOF_INDEX["xA"], DOF_INDEX["yA"], DOF_INDEX["xB"], DOF_INDEX["yB"],
-                        *p.bearing("B")], dtype=float)
-        ctx = EffectContext(q_static=q_static, params=p, bearing_stiffness=(
-            bearing_stiffness(q_static[0], q_static[1], p, which="A"),
-            bearing_stiffness(q_static[10], q_static[11], p, which="B")))
+                        *p.bearing("B"), *(h for _, _, housing in bearings for h in housing)],
+                       dtype=float)
+        ctx = EffectContext(q_static=q_static, params=p, bearing_stiffness=tuple(
+            bearing_stiffness(*self._relative(q_static, journal, housing), p, which=which)
+            for which, journal, housing in bearings))
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
@@ -150,9 +199,16 @@ class RotorBearingSimulator:
         p, m = self.effective_params, self.matrices
         q = self.static_equilibrium()
         K = m.K.copy()
-        for ix, iy, which in ((0, 1, "A"), (10, 11, "B")):
-            K[np.ix_([ix, iy], [ix, iy])] += bearing_stiffness(q[ix], q[iy], p, which=which)
-        unb = np.zeros(12, dtype=complex)
+        for which, journal, housing in self._bearings():
+            kb = bearing_stiffness(*self._relative(q, journal, housing), p, which=which)
+            jj = list(journal)
+            K[np.ix_(jj, jj)] += kb
+            if housing[0] >= 0:  # the contact between journal and housing
+                hh = list(housing)
+                K[np.ix_(hh, hh)] += kb
+                K[np.ix_(jj, hh)] -= kb
+                K[np.ix_(hh, jj)] -= kb
+        unb = np.zeros(m.M.shape[0], dtype=complex)
         for name, me, ph in (("O1", p.m_O1 * p.e, p.unbalance_phase),
                              ("O2", p.m_O2 * p.resolved("e_O2"), p.beta + p.unbalance_phase)):
             unb[DOF_INDEX["x" + name]] = me * np.exp(1j * ph)
@@ -221,8 +277,8 @@ class RotorBearingSimulator:
         phi0 = -float(np.sum(0.5 * (w[1 : n_settle + 1] + w[:n_settle])) * dt)
         stop = w.size - 1 if stop is None else stop
         record_from = min(n_settle, stop)
-        q0, v0 = ((s.q_static.copy(), np.zeros(12)) if state is None else
-                  (np.array(state[0], dtype=float), np.array(state[1], dtype=float)))
+        q0, v0 = ((s.q_static.copy(), np.zeros(s.q_static.size)) if state is None else
+                  self._adapt_state(state))
         Q, U, PHI, status, q_end, v_end = integrate(
             q0, v0, np.ascontiguousarray(w[: stop + 1], dtype=float), phi0,
             -n_settle * dt, dt, int(substeps), record_from, s.minv, s.C, s.G, s.K, s.fg,
@@ -240,9 +296,24 @@ class RotorBearingSimulator:
         # columns as arrays: inner loops (calibration) skip the DataFrame entirely
         t = (record_from - n_settle + np.arange(Q.shape[0])) * dt
         columns = {"speed": w[record_from : stop + 1], "t": t, "u": U, "phi": PHI}
-        columns.update(zip(DOF_NAMES, Q.T, strict=True))
+        columns.update(zip(self.dof_names, Q.T, strict=True))
         columns["_state"] = (q_end, v_end)
         return columns
+
+    def _adapt_state(self, state):
+        """``(q, v)`` for this simulator's DOFs from a state of a rotor with or without
+        pedestals (a calibration continues one candidate's settled runs with another's):
+        housings a state lacks start at rest on their static deflection."""
+        q, v = (np.array(a, dtype=float) for a in state)
+        n = self._setup.q_static.size
+        sizes = (len(DOF_NAMES), len(DOF_NAMES) + len(HOUSING_NAMES))
+        if q.shape != v.shape or q.ndim != 1 or q.size not in sizes:
+            raise ValueError(f"state must be (q, v) of {sizes[0]} or {sizes[1]} values each; "
+                             f"got shapes {q.shape}, {v.shape}.")
+        if q.size < n:
+            q = np.r_[q, self._setup.q_static[q.size:]]
+            v = np.r_[v, np.zeros(n - v.size)]
+        return q[:n].copy(), v[:n].copy()
 
     def warm_state(self, omega, fs=1000.0, settle=2.0, lead=0.3, substeps=None):
         """The rotor's state ``lead`` seconds before the record of a run settled for
@@ -271,7 +342,8 @@ class RotorBearingSimulator:
         Returns
         -------
         tuple of ndarray
-            ``(q, v)``: displacements (m, rad) and velocities (m/s, rad/s) of the 12 DOF.
+            ``(q, v)``: displacements (m, rad) and velocities (m/s, rad/s) of the DOFs
+            (:attr:`dof_names`: 12, or 16 with pedestals).
 
         Examples
         --------
