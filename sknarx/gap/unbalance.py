@@ -190,11 +190,9 @@ class RigInfluenceModel:
         rotor = replace(self.rotor, bearings=bearings)
         speed_ids = list(dict.fromkeys(s for s, _ in channels))
         w = np.array([self.speeds_rpm[s] * RPM for s in speed_ids])
-        planes = {}
-        for pr in self._probe:
-            pos = float(pr["position"])
-            if pos not in planes:
-                planes[pos] = rotor.probe_responses(w, pos, n_modes=24)
+        positions = list(dict.fromkeys(float(pr["position"]) for pr in self._probe))
+        both = rotor.responses_at(w, positions, n_modes=24)
+        planes = {pos: both[:, i] for i, pos in enumerate(positions)}
         H = np.empty((len(channels), nd), dtype=complex)
         for j, (s, name) in enumerate(channels):
             i = self.probes.index(name)

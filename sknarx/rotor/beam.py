@@ -15,6 +15,7 @@ RK-4 data.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 import scipy.linalg as sla
@@ -83,37 +84,11 @@ class BeamRotor:
         return replace(self, bearings=tuple(replace(b, **changes) for b in self.bearings))
 
     def matrices(self):
-        z = self.nodes
-        n = z.size
-        N = 4 * n
-        M = np.zeros((N, N))
-        K = np.zeros((N, N))
-        C = np.zeros((N, N))
-        G = np.zeros((N, N))
-        A = np.pi * self.diameter**2 / 4
-        EI = self.E * np.pi * self.diameter**4 / 64
-        for e in range(n - 1):
-            L = z[e + 1] - z[e]
-            k = EI / L**3 * np.array([[12, 6 * L, -12, 6 * L],
-                                      [6 * L, 4 * L * L, -6 * L, 2 * L * L],
-                                      [-12, -6 * L, 12, -6 * L],
-                                      [6 * L, 2 * L * L, -6 * L, 4 * L * L]])
-            m = self.density * A * L / 420 * np.array(
-                [[156, 22 * L, 54, -13 * L], [22 * L, 4 * L * L, 13 * L, -3 * L * L],
-                 [54, 13 * L, 156, -22 * L], [-13 * L, -3 * L * L, -22 * L, 4 * L * L]])
-            for plane in (0, 2):
-                a, b = 4 * e + plane, 4 * (e + 1) + plane
-                idx = [a, a + 1, b, b + 1]
-                K[np.ix_(idx, idx)] += k
-                M[np.ix_(idx, idx)] += m
-        for d in self.disks:
-            i = 4 * self.node(d.position)
-            M[i, i] += d.mass
-            M[i + 2, i + 2] += d.mass
-            M[i + 1, i + 1] += d.diametral_inertia
-            M[i + 3, i + 3] += d.diametral_inertia
-            G[i + 1, i + 3] += d.polar_inertia
-            G[i + 3, i + 1] -= d.polar_inertia
+        """``M, C, G, K`` (SI) with the bearings; the shaft and disks' part is computed
+        once per geometry (a calibration changes only the bearings)."""
+        # the key keeps the bearings' positions (mesh nodes), not their values
+        where = tuple(Bearing(b.position, 0.0, 0.0, 0.0, 0.0) for b in self.bearings)
+        M, C, G, K = (X.copy() for X in _structure(replace(self, bearings=where)))
         for b in self.bearings:
             i = 4 * self.node(b.position)
             K[i, i] += b.kxx
@@ -130,8 +105,12 @@ class BeamRotor:
         projected), which makes a speed sweep ~10x cheaper; ``None`` solves the full
         model (one factorisation per speed, every disk as a right-hand side).
         """
+        return self.responses_at(speeds, (probe,), n_modes)[:, 0]
+
+    def responses_at(self, speeds, probes, n_modes: int | None = 24) -> np.ndarray:
+        """:meth:`probe_responses` at several axial positions (m) from one solve per
+        speed: shape (n_speeds, n_probes, n_disks, 2)."""
         M, C, G, K = self.matrices()
-        j = 4 * self.node(probe)
         nd = len(self.disks)
         F = np.zeros((M.shape[0], nd), dtype=complex)
         for d, disk in enumerate(self.disks):
@@ -143,12 +122,13 @@ class BeamRotor:
             _, P = sla.eigh(K, M, subset_by_index=[0, n_modes - 1])
         Mr, Cr, Gr, Kr = (P.T @ A @ P for A in (M, C, G, K))
         Fr = P.T @ F
-        rows = P[[j, j + 2]]
-        out = np.empty((len(speeds), nd, 2), dtype=complex)
+        rows = [P[[j, j + 2]] for j in (4 * self.node(z) for z in probes)]
+        out = np.empty((len(speeds), len(rows), nd, 2), dtype=complex)
         for k, w in enumerate(np.asarray(speeds, dtype=float)):
             D = Kr - w * w * Mr + 1j * w * (Cr + w * Gr)
             X = sla.solve(D, w * w * Fr, check_finite=False)
-            out[k] = (rows @ X).T
+            for r, rw in enumerate(rows):
+                out[k, r] = (rw @ X).T
         return out
 
     def natural_frequencies(self, n=4):
@@ -156,6 +136,47 @@ class BeamRotor:
         M, C, G, K = self.matrices()
         lam = sla.eigh(K, M, eigvals_only=True, subset_by_index=[0, n - 1])
         return np.sqrt(np.clip(lam, 0, None))
+
+
+@lru_cache(maxsize=16)
+def _structure(rotor):
+    """Shaft and disk matrices ``M, C, G, K`` of a rotor without bearings (read-only:
+    :meth:`BeamRotor.matrices` copies them). The bearings' positions are nodes of the
+    mesh; their values are not used."""
+    z = rotor.nodes
+    n = z.size
+    N = 4 * n
+    M = np.zeros((N, N))
+    K = np.zeros((N, N))
+    C = np.zeros((N, N))
+    G = np.zeros((N, N))
+    A = np.pi * rotor.diameter**2 / 4
+    EI = rotor.E * np.pi * rotor.diameter**4 / 64
+    for e in range(n - 1):
+        L = z[e + 1] - z[e]
+        k = EI / L**3 * np.array([[12, 6 * L, -12, 6 * L],
+                                  [6 * L, 4 * L * L, -6 * L, 2 * L * L],
+                                  [-12, -6 * L, 12, -6 * L],
+                                  [6 * L, 2 * L * L, -6 * L, 4 * L * L]])
+        m = rotor.density * A * L / 420 * np.array(
+            [[156, 22 * L, 54, -13 * L], [22 * L, 4 * L * L, 13 * L, -3 * L * L],
+             [54, 13 * L, 156, -22 * L], [-13 * L, -3 * L * L, -22 * L, 4 * L * L]])
+        for plane in (0, 2):
+            a, b = 4 * e + plane, 4 * (e + 1) + plane
+            idx = [a, a + 1, b, b + 1]
+            K[np.ix_(idx, idx)] += k
+            M[np.ix_(idx, idx)] += m
+    for d in rotor.disks:
+        i = 4 * rotor.node(d.position)
+        M[i, i] += d.mass
+        M[i + 2, i + 2] += d.mass
+        M[i + 1, i + 1] += d.diametral_inertia
+        M[i + 3, i + 3] += d.diametral_inertia
+        G[i + 1, i + 3] += d.polar_inertia
+        G[i + 3, i + 1] -= d.polar_inertia
+    for X in (M, C, G, K):
+        X.setflags(write=False)
+    return M, C, G, K
 
 
 def beam_rotor_from_config(cfg: dict) -> tuple[BeamRotor, dict]:
