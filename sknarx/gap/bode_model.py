@@ -11,6 +11,8 @@ projection); ``p`` is fitted by least squares from several starts.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -60,15 +62,27 @@ class OrderModel:
                                             self.runup["rate_rpm_s"], TRANSIENT_TOL)
             sel = (rpm >= lo) & (rpm <= hi)
             if sel.any() and hi > lo:
-                rr, Z = runup_order_response(r, lo, hi, self.runup["rate_rpm_s"],
-                                             self.probe["position"], n_modes=8,
-                                             samples_per_rev=64, gyro_speed=w_first)
+                rr, Z = _tracked_runup(r, lo, hi, self.runup["rate_rpm_s"],
+                                       self.probe["position"], w_first)
                 Zp = np.cos(angle) * Z[..., 0] + np.sin(angle) * Z[..., 1]  # (rev, disk, u)
                 Zp = Zp.reshape(len(rr), -1)
                 for col in range(B.shape[1]):
                     B[sel, col] = (np.interp(rpm[sel], rr, Zp[:, col].real)
                                    + 1j * np.interp(rpm[sel], rr, Zp[:, col].imag))
         return B
+
+
+@lru_cache(maxsize=32)
+def _tracked_runup(rotor, rpm_start, rpm_end, rate_rpm_s, probe, gyro_speed):
+    """:func:`runup_order_response` of the order model's settings, remembered: a fit
+    asks for the same bearings more than once (a quarter of the calls on the RK-4
+    run-up: a step's value and its Jacobian's base point, a pair started from its
+    lead); the arrays are read-only."""
+    rpm, Z = runup_order_response(rotor, rpm_start, rpm_end, rate_rpm_s, probe, n_modes=8,
+                                  samples_per_rev=64, gyro_speed=gyro_speed)
+    rpm.setflags(write=False)
+    Z.setflags(write=False)
+    return rpm, Z
 
 
 def solve_real_linear(B, z, w):
