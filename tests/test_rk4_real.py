@@ -24,7 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "rk4-runup" / "runup_bode.csv"
 DATA = Path(load_rk4_runup().filename)
 
-pytestmark = pytest.mark.slow
+# one core builds the diagnosis once (a module fixture) and runs every test of it
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("rk4-run-up")]
 
 
 @pytest.fixture(scope="module")

@@ -64,6 +64,7 @@ def test_gyroscopic_stiffening_of_forward_modes(sim):
     assert 100 < crit[0] < 160
 
 
+@pytest.mark.xdist_group("coarse-sweep")  # one core builds the sweep
 def test_peak_of_disk_amplitude_matches_paper(coarse_sweep):
     amp = coarse_sweep.groupby("speed")["xO1"].agg(lambda x: (x.max() - x.min()) / 2)
     peak = amp.idxmax()
@@ -109,6 +110,7 @@ def test_identical_for_any_n_jobs_and_repeated_runs(sim):
     pd.testing.assert_frame_equal(b, c)
 
 
+@pytest.mark.xdist_group("coarse-sweep")  # one core builds the sweep
 def test_sweep_table_layout(coarse_sweep):
     cols = list(coarse_sweep.columns)
     assert cols[:4] == ["speed", "t", "u", "phi"] and cols[4:] == list(R.DOF_NAMES)
