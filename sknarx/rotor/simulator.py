@@ -45,6 +45,10 @@ class _Setup:
 class RotorBearingSimulator:
     """12-DOF rotor with a bolted joint on two nonlinear ball bearings (Jin et al. 2022).
 
+    An effect that mounts the bearings in housings on pedestals
+    (:class:`~sknarx.rotor.SupportAnisotropy`) adds the housings' four DOFs
+    (:attr:`dof_names`); the recorded columns stay the rotor's.
+
     Parameters
     ----------
     params : RotorParameters, optional
