@@ -474,6 +474,17 @@ class SupportAnisotropy(Effect):
 
     Signature: the critical speed splits into a horizontal and a vertical one;
     elliptical orbits, x and y 1x amplitudes peak at different speeds.
+
+    Examples
+    --------
+    >>> from sknarx.rotor import RotorBearingSimulator, SupportAnisotropy
+    >>> soft_x = SupportAnisotropy(kx=5e6, ky=1e9, mass=15.0, damping=900.0)
+    >>> sim = RotorBearingSimulator(effects=[soft_x])
+    >>> sim.dof_names[-4:]
+    ('xHA', 'yHA', 'xHB', 'yHB')
+    >>> cols = sim.simulate_columns(150.0, n_samples=200, settle=0.2)
+    >>> "xHA" in cols, cols["xA"].shape
+    (False, (200,))
     """
 
     kx: float = 5e6
