@@ -48,5 +48,10 @@ def render() -> str:
 
 
 if __name__ == "__main__":
+    import sys
+
+    # document the checkout this script lives in, whichever copy pip's editable install
+    # points at (a second clone re-points it)
+    sys.path.insert(0, str(OUT.parents[1]))
     OUT.write_text(render())
     print(f"wrote {OUT}")
