@@ -14,7 +14,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from plants.families import CHANNELS, make_family_trial  # noqa: E402
+from plants.families import CHANNELS, draw_trial, make_family_trial  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -47,7 +47,7 @@ def test_diagnosis_names_per_probe_runout_on_the_second_derivation():
                                               ["runout", "speed-fluctuation"])
     assert d["verdict"] == "runout", d["ranking"][:2]
     assert d["shrink"] >= 0.9 * oracle_shrink
-    _, truth, _, _ = make_family_trial("runout", 7013, "second")
+    truth = draw_trial("runout", 7013, "second")  # the drawn truth, not another sweep
     fit = next(r for r in d["ranking"] if r["effect"] == "runout")["params"]
     for ch, (amp, phase, _, _) in truth["effects"]["runout"].items():
         got = fit[ch]["1x_m"] * np.exp(1j * np.radians(fit[ch]["1x_deg"]))

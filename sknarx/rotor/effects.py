@@ -28,7 +28,7 @@ from numba import njit
 
 from .integrator import no_extra_force
 from .parameters import DOF_NAMES
-from .pedestals import HOUSING_NAMES, Pedestals
+from .pedestals import JOURNAL_OF, Pedestals
 
 __all__ = [
     "Effect",
@@ -515,15 +515,11 @@ class SupportAnisotropy(Effect):
                          damping=(float(self.damping), float(self.damping)))
 
     def measure(self, table, rng, context=None):
-        housings = [name for name in HOUSING_NAMES if name in table]
         if self.probes == "housing":
-            for name in housings:
-                # xHA -> xA: the journal read from its own housing
-                journal = name[0] + name[2]
-                if journal in table:
-                    table[journal] = np.asarray(table[journal]) - np.asarray(table[name])
-        for name in housings:
-            table.pop(name)
+            for housing, journal in JOURNAL_OF.items():
+                if housing in table and journal in table:
+                    # the journal read from its own housing
+                    table[journal] = np.asarray(table[journal]) - np.asarray(table[housing])
         return table
 
 

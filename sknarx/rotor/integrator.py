@@ -50,15 +50,16 @@ def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
         # the housings' DOFs at 11-14 (-1: held by the frame)
         kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
         hx, hy = int(brg[11 + 2 * b]), int(brg[12 + 2 * b])
-        if hx >= 0:
-            # the contact between journal and housing, the reaction on the housing
-            fx, fy = bearing_force(q[ix] - q[hx], q[iy] - q[hy], phi, kB, gamma, expo, nb, cr)
-            f[hx] -= fx
-            f[hy] -= fy
-        else:
-            fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, expo, nb, cr)
+        x, y = q[ix], q[iy]
+        if hx >= 0:  # the contact between journal and housing
+            x -= q[hx]
+            y -= q[hy]
+        fx, fy = bearing_force(x, y, phi, kB, gamma, expo, nb, cr)
         f[ix] += fx
         f[iy] += fy
+        if hx >= 0:  # and its reaction on the housing
+            f[hx] -= fx
+            f[hy] -= fy
     extra(t, phi, w, al, q, v, eparams, f)
     for i in range(n):
         acc_i = f[i]

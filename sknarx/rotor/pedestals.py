@@ -19,10 +19,12 @@ import numpy as np
 
 from .matrices import DOF_INDEX, RotorMatrices
 
-__all__ = ["HOUSING_NAMES", "Pedestals", "bearing_dofs", "with_pedestals"]
+__all__ = ["HOUSING_NAMES", "JOURNAL_OF", "Pedestals", "bearing_dofs", "with_pedestals"]
 
 #: housing displacements (m) appended after the rotor's DOFs
 HOUSING_NAMES = ("xHA", "yHA", "xHB", "yHB")
+#: each housing DOF's journal DOF (the same bearing and direction)
+JOURNAL_OF = dict(zip(HOUSING_NAMES, ("xA", "yA", "xB", "yB"), strict=True))
 
 _JOURNALS = ((DOF_INDEX["xA"], DOF_INDEX["yA"]), (DOF_INDEX["xB"], DOF_INDEX["yB"]))
 

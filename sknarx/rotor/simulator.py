@@ -390,6 +390,9 @@ class RotorBearingSimulator:
         ctx = self._setup.context
         for eff in self.effects:
             columns = eff.measure(columns, rng, context=ctx)
+        # the probes have read the housings; the record holds the rotor's DOFs
+        for name in HOUSING_NAMES:
+            columns.pop(name, None)
         return columns
 
     def simulate(self, omega, fs=1000.0, n_samples=8192, settle=2.0, substeps=None):
