@@ -98,6 +98,76 @@ def test_small_keyphasor_offsets_are_not_a_gap_but_large_ones_are():
         assert (cmp[cmp.feature == "1x"].z2.max() > 9) == expect_gap
 
 
+def _feature_frame(rng, speeds=(100.0, 150.0), channels=("xO1", "xA"), tol_1x=0.0):
+    feats = ["1/3x", "1/2x", "1x", "2x", "3x", "nonsync 0-0.75x"]
+    idx = pd.MultiIndex.from_product([speeds, ["steady"], channels, feats],
+                                     names=["speed", "window", "channel", "feature"])
+    f = idx.to_frame(index=False)
+    size = np.where(f.feature == "1x", 1e-4, 5e-6)
+    f["re"], f["im"] = size * rng.standard_normal((2, len(f)))
+    f["se"] = 1e-7 * (1 + rng.random(len(f)))
+    f["model_tol"] = np.where(f.feature == "1x", tol_1x * np.hypot(f.re, f.im), 0.0)
+    return f
+
+
+@given(st.integers(0, 2**31 - 1), st.floats(0.0, 0.9))
+def test_the_calibration_residual_is_the_gap_maps_comparison(seed, tol_1x):
+    # one kernel for both: what a calibration minimises is what the gap map reports
+    from sknarx.gap.gapmap import fast_residual, feature_layout
+
+    rng = np.random.default_rng(seed)
+    meas = _feature_frame(rng, tol_1x=tol_1x)
+    sim = meas.assign(re=meas.re * (1 + 0.3 * rng.standard_normal(len(meas))),
+                      im=meas.im + 2e-6 * rng.standard_normal(len(meas)),
+                      se=1e-7).drop(columns="model_tol")
+    cmp = compare(meas, sim)
+    order_k, speed_idx, group_idx = feature_layout(
+        meas.set_index(["speed", "window", "channel", "feature"]).index)
+    r = fast_residual(meas.re.to_numpy() + 1j * meas.im.to_numpy(), meas.se.to_numpy(),
+                      sim.re.to_numpy() + 1j * sim.im.to_numpy(), sim.se.to_numpy(),
+                      order_k, speed_idx, group_idx, model_tol=meas.model_tol.to_numpy())
+    n = len(meas)
+    np.testing.assert_allclose(r[:n] ** 2 + r[n:] ** 2, cmp.z2.to_numpy(), rtol=1e-9)
+
+
+def test_a_journals_harmonics_follow_its_admitted_1x_phase_error():
+    # a journal's 1x 30 deg off, inside its 1x model-form tolerance: its 2x and 3x off by
+    # 60 and 90 deg (locked to the orbit) are no gap; beyond the tolerance, or where
+    # the 1x is trusted, they are
+    rng = np.random.default_rng(3)
+    sim = _feature_frame(rng, speeds=(100.0,), channels=("xA",)).drop(columns="model_tol")
+    k = sim.feature.map({"1x": 1.0, "2x": 2.0, "3x": 3.0}).fillna(0.0).to_numpy()
+    z = (sim.re + 1j * sim.im).to_numpy() * np.exp(1j * k * np.radians(30.0))
+    meas = sim.assign(re=z.real, im=z.imag)
+    harm = meas.feature.isin(["2x", "3x"]).to_numpy()
+    for tol_1x, is_gap in ((0.6, False), (0.1, True), (0.0, True)):
+        m = meas.assign(model_tol=np.where(meas.feature == "1x", tol_1x * 1e-4, 0.0))
+        assert (compare(m, sim).z2.to_numpy()[harm].max() > 9) == is_gap, tol_1x
+
+
+@given(st.floats(0.01, 100.0))
+def test_inflating_a_harmonic_never_widens_its_own_tolerance(scale):
+    from sknarx.gap.gapmap import HARMONIC_RTOL
+
+    # harmonics agree to a share of the *smaller* size: a candidate whose 2x grows past
+    # the measured one only moves further away
+    rng = np.random.default_rng(0)
+    meas = _feature_frame(rng, speeds=(100.0,), channels=("xO1",))
+    two = (meas.feature == "2x").to_numpy()
+
+    def z2(s):
+        sim = meas.assign(re=np.where(two, s * meas.re, meas.re),
+                          im=np.where(two, s * meas.im, meas.im))
+        return compare(meas, sim).z2.to_numpy()[two][0]
+
+    if scale > 1:
+        assert z2(scale * 1.1) > z2(scale) > z2(1.0)
+        if scale > 2.5:  # a share of the larger size would cap z2 below 1 / rtol^2
+            assert z2(scale) > 1.0 / HARMONIC_RTOL**2
+    else:
+        assert z2(scale * 0.9) > z2(scale) >= z2(1.0)
+
+
 @pytest.mark.parametrize(
     "mutate, match",
     [

@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
 from .features import record_features, stack_features
-from .gapmap import compare, fast_residual, gap_statistic
+from .gapmap import compare, fast_residual, feature_layout, gap_statistic
 from .jacobian import SecantJacobian
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
@@ -241,9 +241,6 @@ def _model_tol(meas_feats, keys):
     return m["model_tol"].fillna(0.0).to_numpy(dtype=float)
 
 
-_ORDER_K = {"1/3x": 1 / 3, "1/2x": 0.5, "1x": 1.0, "2x": 2.0, "3x": 3.0}  # nonsync: 0
-
-
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
               fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None):
@@ -282,11 +279,11 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
 
     lo, hi, log, names, x_start = _split_x(classes)
     speeds = np.asarray(speeds, dtype=float)
-    keys, _, _, nons = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
+    keys, _, _, _ = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
     Mc, se_m = _measured_arrays(meas_feats, keys)
     tol = _model_tol(meas_feats, keys)
-    speed_idx = np.searchsorted(speeds, np.array([k[0] for k in keys]))
-    order_k = np.array([_ORDER_K.get(k[3], 0.0) for k in keys])
+    order_k, speed_idx, group_idx = feature_layout(pd.MultiIndex.from_tuples(
+        keys, names=["speed", "window", "channel", "feature"]))
     size = 2 * len(keys)
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)
@@ -298,7 +295,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                 warnings.simplefilter("ignore")
                 _, Sc, se_s, _ = sweep.feature_arrays(speeds, nuis, effects)
             Sc, _ = project(Sc, se_s)
-            r = fast_residual(Mc, se_m, Sc, se_s, nons, speed_idx, order_k, model_tol=tol)
+            r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
+                              model_tol=tol)
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             return np.full(size, 1e3)
         return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
