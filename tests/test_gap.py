@@ -333,7 +333,12 @@ def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_
     best = d["ranking"][0]
     fitted = (best["nuisance"]["stiffness_scale"] * (1 + upd["k1"])
               * best["params"]["element_scale"])
-    assert abs(fitted / truth["nuisance"]["stiffness_scale"] - 1) < 0.03
+    rig, trap = truth["nuisance"]["stiffness_scale"], absorbed
+    assert abs(fitted - rig) < 0.5 * abs(trap - rig)
+    # within 3 % while harmonics had to agree to the noise; with the 30 % harmonic
+    # tolerance (gapmap.HARMONIC_RTOL) the 2x sets the depth less tightly and depth and
+    # element stiffness trade: +4.4 % (depth 0.47 for 0.42), the trap at -8.8 %
+    assert abs(fitted / rig - 1) < 0.06
 
 
 def _settled_sweep(seed=3, n_speeds=8):
