@@ -182,10 +182,15 @@ def truth_label(rec):
     return "no-gap" if k == "none" else (sorted(k) if isinstance(k, list) else k)
 
 
+def visible(rec, s):
+    """An effect (in the library or not) that moves the measurement by more than the
+    noise floor: the same plant without it differs from the measurement by more."""
+    return rec["kind"] != "none" and rec["effect_gap"] > s.no_gap_per_feature
+
+
 def detectable(rec, s):
     """An in-library effect that moves the measurement by more than the noise floor."""
-    return (rec["in_library"] and rec["kind"] != "none"
-            and rec["effect_gap"] > s.no_gap_per_feature)
+    return rec["in_library"] and visible(rec, s)
 
 
 def top2_names(rec):
@@ -197,7 +202,9 @@ def score(recs, s):
     singles = [r for r in lib if isinstance(r["kind"], str)]
     pairs = [r for r in lib if isinstance(r["kind"], list)]
     free = [r for r in recs if r["kind"] == "none"]
-    out = [r for r in recs if not r["in_library"]]
+    # an out-of-library effect below the noise floor cannot be told from none: like an
+    # undetectable in-library effect it is counted, not scored (its verdict is no-gap)
+    out = [r for r in recs if not r["in_library"] and visible(r, s)]
 
     def rate(rs, ok):
         return float(np.mean([ok(r) for r in rs])) if rs else float("nan")
@@ -215,6 +222,8 @@ def score(recs, s):
         "n_effect_free": len(free), "n_out_of_library": len(out),
         "n_undetectable": sum(1 for r in recs if r["in_library"] and r["kind"] != "none"
                               and not detectable(r, s)),
+        "n_out_of_library_undetectable": sum(1 for r in recs if not r["in_library"]
+                                             and not visible(r, s)),
         "n_trials": len(recs),
     }
 
@@ -378,7 +387,7 @@ def main():
                                 "verdict": verdict(r, frozen)[0], "e0": r["e0"],
                                 "effect_gap": r["effect_gap"]}
                                for r in recs
-                               if (detectable(r, frozen) or not r["in_library"]
+                               if (visible(r, frozen)
                                    or r["kind"] == "none")
                                and verdict(r, frozen)[0] != (truth_label(r) if r["in_library"]
                                                              else "unexplained")]}

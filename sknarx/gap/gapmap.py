@@ -4,14 +4,17 @@ Each measured feature is compared with its simulated twin, normalised by a noise
 floor: ``z2 = |M - S|^2 / (se_M^2 + se_S^2 + (rtol |S|)^2)``, whose expectation is 2
 for a complex order vector when the two agree within noise (chi-square with two
 degrees of freedom) -- ``rtol`` (1 % by default) admits the model-form error no
-calibration removes. The *excess* ``max(z2 - 2, 0)`` is the gap that noise cannot
+calibration removes, a measured ``model_tol`` column the nominal model's stated
+model-form error, and a harmonic (1/3x-3x) also agrees to ``HARMONIC_RTOL`` of the
+smaller of its two sizes. The *excess* ``max(z2 - 2, 0)`` is the gap that noise cannot
 explain; regions are runs of adjacent speeds where it is significant, ranked by
 their share of the total excess.
 
 Small phase offsets of the once-per-revolution reference are removed first: per
 speed step, the measured vectors are rotated by ``-k delta`` with ``delta`` the
 1x phase difference (bounded by ``max_offset_deg``), so a jittery keyphasor does
-not masquerade as a gap.
+not masquerade as a gap; then each channel's 2x and 3x follow that channel's own 1x
+phase error as far as its 1x tolerance admits (see ``_normalised``).
 """
 
 from __future__ import annotations
