@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
 from .features import record_features, stack_features
-from .gapmap import compare, fast_residual, feature_layout, gap_statistic
+from .gapmap import compare, fast_residual, feature_layout, gap_statistic, model_tol
 from .jacobian import SecantJacobian
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
@@ -224,21 +224,13 @@ def _probe_key(classes, combo, x):
             tuple(tuple(sorted(c.items())) for c in combo), np.asarray(x).tobytes())
 
 
-def _measured_arrays(meas_feats, keys):
-    m = meas_feats.set_index(["speed", "window", "channel", "feature"]).reindex(
-        pd.MultiIndex.from_tuples(keys))
+def _measured_arrays(meas_feats, index):
+    """Measured vectors (m), standard errors and model-form tolerances (m) in the order
+    of the simulated features' ``index``."""
+    m = meas_feats.set_index(list(index.names)).reindex(index)
     if m["re"].isna().any():
         raise ValueError("measured and simulated features do not align")
-    return m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy()
-
-
-def _model_tol(meas_feats, keys):
-    """The measured features' model-form tolerance (see ``gapmap.compare``), or None."""
-    if "model_tol" not in meas_feats.columns:
-        return None
-    m = meas_feats.set_index(["speed", "window", "channel", "feature"]).reindex(
-        pd.MultiIndex.from_tuples(keys))
-    return m["model_tol"].fillna(0.0).to_numpy(dtype=float)
+    return m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy(), model_tol(m)
 
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
@@ -280,10 +272,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     lo, hi, log, names, x_start = _split_x(classes)
     speeds = np.asarray(speeds, dtype=float)
     keys, _, _, _ = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
-    Mc, se_m = _measured_arrays(meas_feats, keys)
-    tol = _model_tol(meas_feats, keys)
-    order_k, speed_idx, group_idx = feature_layout(pd.MultiIndex.from_tuples(
-        keys, names=["speed", "window", "channel", "feature"]))
+    index = pd.MultiIndex.from_tuples(keys, names=["speed", "window", "channel", "feature"])
+    Mc, se_m, tol = _measured_arrays(meas_feats, index)
+    order_k, speed_idx, group_idx = feature_layout(index)
     size = 2 * len(keys)
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)

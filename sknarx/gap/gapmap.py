@@ -60,15 +60,15 @@ HARMONIC_TOL = 1.0
 HARMONIC_RTOL = 0.3
 
 
-def model_form_var(meas: pd.DataFrame) -> np.ndarray:
-    """Variance (m^2) of a measured feature's ``model_tol`` column: the model-form
-    tolerance, in metres, fixed once from the updated nominal model (0 or absent: none).
+def model_tol(meas: pd.DataFrame) -> np.ndarray:
+    """Each measured feature's model-form tolerance (m): its ``model_tol`` column, fixed
+    once from the updated nominal model (0 or absent: none).
 
     Absolute, not a share of the simulation being compared: a tolerance that grew with
     the candidate's own harmonics would reward a candidate for inflating them."""
     if "model_tol" not in meas.columns:
         return np.zeros(len(meas))
-    return meas["model_tol"].fillna(0.0).to_numpy(dtype=float) ** 2
+    return meas["model_tol"].fillna(0.0).to_numpy(dtype=float)
 
 
 def _per_group(idx, values, n):
@@ -146,7 +146,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     Mc = m["re"].to_numpy() + 1j * m["im"].to_numpy()
     Sc = s["re"].to_numpy() + 1j * s["im"].to_numpy()
     order_k, speed_idx, group_idx = feature_layout(m.index)
-    tol = np.sqrt(model_form_var(m))
+    tol = model_tol(m)
     d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k,
                        speed_idx, group_idx, tol, rtol, max_offset_deg)
     z2 = np.abs(d) ** 2
