@@ -151,7 +151,8 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
         "oracle_E": e_or, "oracle_shrink": 1 - e_or / E0 if E0 > 0 else 0.0,
         "effect_gap": e_eff / max(n_eff, 1),
         "ranking": [{"effect": r["effect"], "shrink": r["shrink"], "log_shrink": r["log_shrink"],
-                     "E": r["heldout_gap_after"], "score": r["score"], "params": r["params"]}
+                     "E": r["heldout_gap_after"], "score": r["score"], "params": r["params"],
+                     **({"model_error": r["model_error"]} if r.get("model_error") else {})}
                     for r in d["ranking"]],
         "nominal_update": {"updates": upd.get("updates", []),
                            "changes": {p["parameter"]: p["change"]
@@ -174,6 +175,8 @@ def verdict(rec, s):
     if choice is None:
         return "unexplained", 0.0
     names = names_of(choice["effect"])
+    if not names:  # model error alone (an isotropic support): no effect
+        return "no-gap", 0.0
     return (names[0] if len(names) == 1 else sorted(names)), choice["shrink"]
 
 

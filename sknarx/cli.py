@@ -128,7 +128,9 @@ def _gap(args) -> int:
             narx = narx_view_of(result, measured, base)
             progress("NARX view")
         doc = write_gap_outputs(result, out, _command_line(), narx)
-    print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %")
+    print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
+          + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
+             if doc.get("model_error") else ""))
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
     return 0
 

@@ -135,7 +135,8 @@ def effect_names(entry: dict) -> tuple:
 def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
     """Ranking entries of fitted candidates, best first: held-out excess after plus two
     per added parameter. ``_cmp`` and ``_fit`` (the held-out table and the fit) are for
-    the core and the reports, not the document."""
+    the core and the reports, not the document. A candidate whose only change is to the
+    linear rotor (no effect left, see :func:`search`) has ``effect`` ``[]``."""
     out = []
     for f in fits:
         E = f.heldout_excess
@@ -155,7 +156,8 @@ def preferred(ranking: list, settings, n_features: int):
     leaves more than ``pair_trigger`` excess per feature, the pair removes
     ``pair_gain`` of what the single leaves and (with ``pair_margin`` set) scores at
     least that much below it. None without any single."""
-    singles = [r for r in ranking if len(effect_names(r)) == 1]
+    # a candidate left with model error only competes as a single would
+    singles = [r for r in ranking if len(effect_names(r)) <= 1]
     pairs = [r for r in ranking if len(effect_names(r)) == 2]
     if not singles:
         return None
@@ -173,7 +175,9 @@ def preferred(ranking: list, settings, n_features: int):
 def decide(e0: float, ranking: list, settings, n_features: int):
     """The verdict from the held-out gap per feature and the ranked candidates.
 
-    Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained). Kept
+    Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained); a chosen
+    entry without effects (model error only, see :func:`search`) is a ``no-gap`` verdict
+    with the model's error stated (:func:`conclude`). Kept
     separate from the search so thresholds can be fixed on pilot trials and then
     applied unchanged to fresh ones.
 
@@ -220,6 +224,12 @@ class FrontEnd:
         """Each member of the best pair alone, started from the pair's fit."""
         return []
 
+    def linear_forms(self, fit: CandidateFit) -> list:
+        """The candidate refitted with each member that has a linear form
+        (:attr:`sknarx.rotor.Effect.linear_form`) in that form: named by its other
+        members, the linear form's fit in ``details['model_error']``."""
+        return []
+
 
 def run_parallel(n_jobs, calls, desc):
     """Run ``calls`` (zero-argument callables) on threads with a progress bar; results
@@ -242,6 +252,14 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
        each of up to ``n_partners`` partners (``front.partners``, ``front.fit_pair``);
        each member of the best pair is then refitted alone from it
        (``front.refit_members``) and replaces its single fit where it does better.
+    4. Effect or model error: each member of the preferred candidate that has a linear
+       form (an anisotropy's is the isotropic support) is refitted in that form
+       (``front.linear_forms``). Where that form scores as well (held-out excess plus
+       two per parameter: the restriction costs at most the parameter it saves), the
+       member changed the linear rotor only -- model error by the rule that separates
+       the two, however much it removed -- and the candidate is replaced by its other
+       members with the model error stated (none left: model error alone). Repeated
+       while the preferred candidate changes.
     """
     tick = tick or (lambda msg: None)
     singles = run_parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
@@ -269,25 +287,60 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
                 singles = [new if f.names == new.names
                            and new.heldout_excess < f.heldout_excess else f for f in singles]
         tick("pairs")
-    return rank(singles + pairs, E0, cmp0)
+    return _without_linear_members(front, singles + pairs, E0, cmp0, n_features, settings,
+                                   tick)
+
+
+def _without_linear_members(front, fits, E0, cmp0, n_features, settings, tick):
+    """Step 4 of :func:`search`: the ranking, its preferred candidate's members that only
+    change the linear rotor replaced by that model error."""
+    ranked = rank(fits, E0, cmp0)
+    tested = set()
+    while (choice := preferred(ranked, settings, n_features)) is not None:
+        fit = choice["_fit"]
+        if fit.names in tested:
+            break
+        tested.add(fit.names)
+        for alt in front.linear_forms(fit):
+            if alt.heldout_excess + 2.0 * alt.n_params > choice["score"]:
+                continue  # the member did more than a linear change could: an effect
+            logger.info("%s: the %s did no more than %s (held-out excess %.4g against "
+                        "%.4g): model error, not an effect", "+".join(fit.names),
+                        ", ".join(n for n in fit.names if n not in alt.names),
+                        ", ".join(alt.details["model_error"]), alt.heldout_excess,
+                        fit.heldout_excess)
+            # the candidate gives way to its linear form, which also takes the place of
+            # a worse fit of the same members
+            fits = [f for f in fits if f is not fit
+                    and not (f.names == alt.names and f.heldout_excess >= alt.heldout_excess)]
+            fits.append(alt)
+            ranked = rank(fits, E0, cmp0)
+            break
+        tick("effects or model error")
+    return ranked
 
 
 def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:
     """The document's verdict entries from :func:`decide`'s ``choice``: the verdict, the
     shrink of the held-out gap (for ``unexplained``, what the best candidate removed),
     and with a verdict its bootstrap band, the gap after and each region before and
-    after."""
+    after; ``model_error`` where the chosen candidate carries one (the linear form of a
+    member that was no effect, see :func:`search`)."""
     if choice == "no-gap":
         return {"verdict": "no-gap", "shrink": 0.0}
     if choice is None:
         return {"verdict": "unexplained",
                 "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0}
     cmp = choice["_cmp"]
+    gap_after = {"heldout_excess": choice["heldout_gap_after"],
+                 "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))}
+    error = {"model_error": choice["model_error"]} if choice.get("model_error") else {}
+    if not effect_names(choice):  # model error alone explains the gap: no effect
+        return {"verdict": "no-gap", "shrink": 0.0, "gap_after": gap_after, **error}
     return {"verdict": choice["effect"], "shrink": choice["shrink"],
             "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
-            "gap_after": {"heldout_excess": choice["heldout_gap_after"],
-                          "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))},
-            "regions_after": regions_after(where, cmp, cmp0)}
+            "gap_after": gap_after, "regions_after": regions_after(where, cmp, cmp0),
+            **error}
 
 
 def public_ranking(ranking: list) -> list[dict]:

@@ -147,23 +147,29 @@ class _SweepFrontEnd(FrontEnd):
         # are its partner's probes on top of the lead, scored once
         self._probe_costs = {}
 
-    def _result(self, names, cal):
-        classes = [EFFECTS[n] for n in names]
+    def _result(self, names, cal, classes=None):
+        """The candidate fit of ``cal``; with ``classes``, those it calibrated, where a
+        class not named in ``names`` is the linear form of a member (model error)."""
+        classes = list(classes) if classes is not None else [EFFECTS[n] for n in names]
         try:
             E, cmp = heldout_gap(self.model, self.meas, self.held, cal, classes)
         except SimulationDivergenceError:
             # calibrated on the training speeds, unstable at a held-out one: rejected
             E, cmp = float("inf"), None
-        params = _plain_params(names, cal.effect_params)
+        plain = _plain_params(classes, cal.effect_params)
+        params = [p for c, p in zip(classes, plain, strict=True) if c.name in names]
+        error = {c.name: p for c, p in zip(classes, plain, strict=True) if c.name not in names}
+        details = {"nuisance": cal.nuisance,
+                   "evidence": table_evidence(self.cmp0, cmp) if cmp is not None else
+                   ["the calibrated model diverges at a held-out speed"],
+                   "signature": [EFFECTS[n].signature for n in names]}
+        if error:
+            details["model_error"] = error
         return CandidateFit(
-            names=tuple(names), params=params if len(names) > 1 else params[0],
+            names=tuple(names), params=params[0] if len(names) == 1 else params,
             params_std={k: v for k, v in cal.std.items() if not k.startswith("nuisance")},
             n_params=cal.n_params - len(NUISANCE), heldout_excess=E, cmp=cmp,
-            details={"nuisance": cal.nuisance,
-                     "evidence": table_evidence(self.cmp0, cmp) if cmp is not None else
-                     ["the calibrated model diverges at a held-out speed"],
-                     "signature": [EFFECTS[n].signature for n in names]},
-            state=cal)
+            details=details, state=cal)
 
     def _calibrate(self, names, **kw):
         return calibrate(self.model, self.meas, self.train, [EFFECTS[n] for n in names],
@@ -224,6 +230,29 @@ class _SweepFrontEnd(FrontEnd):
             cal = self._calibrate((name,), starts=[start], n_probe=0,
                                   fixed=[discrete_settings(pair.state, member, EFFECTS[name])])
             out.append(self._result((name,), cal))
+        return out
+
+    def linear_forms(self, fit):
+        # the member's linear form starts from its fitted instance, the others keep
+        # their fit and discrete settings: only the restriction is tested
+        k = len(NUISANCE)
+        classes = [EFFECTS[n] for n in fit.names]
+        blocks = np.split(fit.state.x[k:], np.cumsum([len(c.bounds) for c in classes])[:-1])
+        out = []
+        for i, cls in enumerate(classes):
+            if cls.linear_form is None:
+                continue
+            form = cls(**fit.state.effect_params[i]).linear_form_of()
+            swapped = [*classes[:i], cls.linear_form, *classes[i + 1:]]
+            start = np.concatenate([fit.state.x[:k], *blocks[:i],
+                                    _search_values(form), *blocks[i + 1:]])
+            fixed = [None if j == i else discrete_settings(fit.state, j, c)
+                     for j, c in enumerate(classes)]
+            cal = calibrate(self.model, self.meas, self.train, swapped, starts=[start],
+                            n_probe=0, fixed=fixed, max_nfev=self.settings.max_nfev,
+                            jacobian_refresh=self.settings.jacobian_refresh,
+                            probe_cache=self._probe_costs)
+            out.append(self._result(fit.names[:i] + fit.names[i + 1:], cal, swapped))
         return out
 
 
@@ -370,19 +399,18 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     return result
 
 
-
-
-
-
-
-
-def _plain_params(names, effect_params):
+def _plain_params(classes, effect_params):
     """Each effect's fitted parameters as plain numbers (projected effects, such as the
     per-probe runout vectors, through their ``to_dict``)."""
-    return [EFFECTS[n](**p).to_dict() if getattr(EFFECTS[n], "projected_orders", None)
-            else p for n, p in zip(names, effect_params, strict=True)]
+    return [c(**p).to_dict() if getattr(c, "projected_orders", None) else p
+            for c, p in zip(classes, effect_params, strict=True)]
 
 
+def _search_values(effect):
+    """An effect's searched parameters as the calibration's vector holds them (log10
+    of the log-scaled ones)."""
+    return np.array([np.log10(getattr(effect, n)) if sc == "log" else getattr(effect, n)
+                     for n, (_lo, _hi, sc) in type(effect).bounds.items()], dtype=float)
 
 
 def _noise_summary(meas):

@@ -110,6 +110,17 @@ def _label(effect):
     return effect if isinstance(effect, str) else " + ".join(effect)
 
 
+#: the effects and their linear forms (a model error a candidate may carry), by name
+_CLASSES = {**{c.linear_form.name: c.linear_form for c in EFFECTS.values()
+               if c.linear_form is not None}, **EFFECTS}
+
+
+def _model_error_text(error) -> str:
+    """A candidate's model error (linear forms of members that were no effect)."""
+    return "; ".join(f"{name}: {effect_parameters(name, values)}"
+                     for name, values in (error or {}).items())
+
+
 
 def effect_parameters(effect, params) -> str:
     """Fitted parameters with units; a value on its search bound is flagged."""
@@ -117,7 +128,7 @@ def effect_parameters(effect, params) -> str:
     groups = [params] if isinstance(effect, str) else list(params)
     parts = []
     for name, values in zip(names, groups, strict=False):
-        cls = EFFECTS.get(name)
+        cls = _CLASSES.get(name)
         for key, value in values.items():
             if isinstance(value, dict) and "1x_m" in value:  # a probe's runout vectors
                 parts.append(f"{key}: 1x {quantity(value['1x_m'], 'm')} at "
@@ -148,7 +159,13 @@ def _html(doc, figs, prov):
     n_feat = doc.get("n_heldout_features")
     upd = doc.get("nominal_update") or {}
     updated = "updated " if upd else ""
-    if verdict == "no-gap":
+    error = _model_error_text(doc.get("model_error"))
+    if verdict == "no-gap" and error:
+        headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
+                    f"{floor:.3g}, is a change of the linear rotor, not an effect: "
+                    f"{error}. A change of linear parameters is model error, however much "
+                    "of the gap it removes.")
+    elif verdict == "no-gap":
         headline = (f"The held-out gap after nuisance calibration, {before:.3g} per feature, "
                     f"is within the no-gap floor of {floor:.3g} (the 99 % level of "
                     f"effect-free sweeps): the {updated}nominal model explains these data"
@@ -165,7 +182,9 @@ def _html(doc, figs, prov):
                     if band else "")
         headline = (f"{_label(verdict)} removes {100 * float(doc['shrink']):.0f} % of the "
                     f"held-out gap{band_txt}; the gap was {before:.3g} per feature against "
-                    f"the no-gap floor {floor:.3g}.")
+                    f"the no-gap floor {floor:.3g}."
+                    + (f" Fitted with it, as model error (a change of the linear rotor, "
+                       f"not an effect): {error}." if error else ""))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
@@ -178,8 +197,10 @@ def _html(doc, figs, prov):
         empty="No speed x order x channel cell differs significantly (z^2 > 9) from the "
               "calibrated nominal model.")
     which = table(
-        ([_label(r["effect"]), f"{100 * r['shrink']:.0f} %",
-          quantity(r["heldout_gap_after"]), effect_parameters(r["effect"], r["params"]),
+        ([_label(r["effect"]) or "model error only", f"{100 * r['shrink']:.0f} %",
+          quantity(r["heldout_gap_after"]),
+          "; ".join(t for t in (effect_parameters(r["effect"], r["params"]),
+                                _model_error_text(r.get("model_error"))) if t),
           "; ".join(r["evidence"])] for r in doc["ranking"]),
         ["candidate", "held-out gap removed", "held-out excess after", "fitted parameters",
          "evidence"],

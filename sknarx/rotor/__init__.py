@@ -12,6 +12,7 @@ from .effects import (
     Rub,
     SpeedFluctuation,
     SupportAnisotropy,
+    SupportFlexibility,
 )
 from .linear import LinearRotorModel
 from .matrices import RotorMatrices, assemble
@@ -37,6 +38,7 @@ __all__ = [
     "BreathingCrack",
     "JointLooseness",
     "SupportAnisotropy",
+    "SupportFlexibility",
     "ProbeRunout",
     "MeasurementNoise",
     "SpeedFluctuation",

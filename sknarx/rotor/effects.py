@@ -38,6 +38,7 @@ __all__ = [
     "JointLooseness",
     "ClearanceChange",
     "SupportAnisotropy",
+    "SupportFlexibility",
     "ProbeRunout",
     "MeasurementNoise",
     "SpeedFluctuation",
@@ -72,6 +73,14 @@ class Effect:
     discrete: dict = {}  # {field: choices} searched over a list (a location, a station)
     units: dict = {}  # {param: SI unit, "-" for a ratio}
     signature = ""
+    #: the restricted form of this effect that only changes the linear rotor (an
+    #: :class:`Effect` class, or None): what that form explains as well is model error,
+    #: not this effect (see :meth:`linear_form_of`)
+    linear_form = None
+
+    def linear_form_of(self):
+        """This effect's nearest instance of :attr:`linear_form` (None without one)."""
+        return None
 
     def modify_parameters(self, params):
         """The rotor parameters with this effect's static change applied (a new object).
@@ -515,12 +524,71 @@ class SupportAnisotropy(Effect):
                          damping=(float(self.damping), float(self.damping)))
 
     def measure(self, table, rng, context=None):
-        if self.probes == "housing":
-            for housing, journal in JOURNAL_OF.items():
-                if housing in table and journal in table:
-                    # the journal read from its own housing
-                    table[journal] = np.asarray(table[journal]) - np.asarray(table[housing])
-        return table
+        return _read_journals(table, self.probes)
+
+    def linear_form_of(self):
+        """The isotropic support of the same housing mass and damping, its stiffness the
+        geometric mean of ``kx`` and ``ky``."""
+        return SupportFlexibility(k=float(np.sqrt(self.kx * self.ky)), mass=self.mass,
+                                  damping=self.damping, probes=self.probes)
+
+
+def _read_journals(table, probes):
+    """The journal columns as probes fixed in the housing (``'housing'``) or the frame
+    read them."""
+    if probes == "housing":
+        for housing, journal in JOURNAL_OF.items():
+            if housing in table and journal in table:
+                # the journal read from its own housing
+                table[journal] = np.asarray(table[journal]) - np.asarray(table[housing])
+    return table
+
+
+@dataclass(repr=False)
+class SupportFlexibility(Effect):
+    """Flexible, isotropic foundation: each bearing's housing, of ``mass`` (kg), on a
+    pedestal of stiffness ``k`` (N/m) and ``damping`` (N s/m), the same in x and y.
+
+    Not a candidate effect: it is :class:`SupportAnisotropy` with ``kx == ky``, a change
+    of the linear rotor only (the housings' resonance shifts the rotor's), which the gap
+    diagnosis counts as model error. It tests a fitted anisotropy: where this form
+    explains the measurement as well, the support was flexible, not anisotropic
+    (:attr:`Effect.linear_form`). The contact acts between journal and housing and the
+    journal probes read as ``probes`` says, as for :class:`SupportAnisotropy`.
+
+    Examples
+    --------
+    >>> from sknarx.rotor import SupportAnisotropy
+    >>> SupportAnisotropy(kx=4e6, ky=9e6, mass=15.0).linear_form_of().k
+    6000000.0
+    """
+
+    k: float = 1e7
+    mass: float = 10.0
+    damping: float = 0.0
+    probes: str = "housing"
+    name = "support-flexibility"
+    bounds = {"k": (1e6, 1e9, "log"), "mass": (2.0, 40.0, "lin"), "damping": (0.0, 2e4, "lin")}
+    start = {"mass": 10.0, "damping": 0.0}
+    units = {"k": "N/m", "mass": "kg", "damping": "N s/m", "probes": ""}
+    signature = "a shifted critical speed and support resonance, the same in x and y"
+
+    def __post_init__(self):
+        if self.probes not in SupportAnisotropy.PROBES:
+            raise ValueError(f"SupportFlexibility: probes={self.probes!r} is not one of "
+                             f"{', '.join(SupportAnisotropy.PROBES)}.")
+        self.pedestals()
+
+    def pedestals(self):
+        return Pedestals(mass=float(self.mass), stiffness=(float(self.k), float(self.k)),
+                         damping=(float(self.damping), float(self.damping)))
+
+    def measure(self, table, rng, context=None):
+        return _read_journals(table, self.probes)
+
+
+# set here, the restricted class being defined after the effect
+SupportAnisotropy.linear_form = SupportFlexibility
 
 
 def compose_force_kernels(kernels):
