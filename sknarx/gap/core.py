@@ -301,7 +301,10 @@ def _without_linear_members(front, fits, E0, cmp0, n_features, settings, tick):
         if fit.names in tested:
             break
         tested.add(fit.names)
-        for alt in front.linear_forms(fit):
+        alts = front.linear_forms(fit)
+        if alts:
+            tick("effect or model error: " + "+".join(fit.names))
+        for alt in alts:
             if alt.heldout_excess + 2.0 * alt.n_params > choice["score"]:
                 continue  # the member did more than a linear change could: an effect
             logger.info("%s: the %s did no more than %s (held-out excess %.4g against "
@@ -316,7 +319,6 @@ def _without_linear_members(front, fits, E0, cmp0, n_features, settings, tick):
             fits.append(alt)
             ranked = rank(fits, E0, cmp0)
             break
-        tick("effects or model error")
     return ranked
 
 
