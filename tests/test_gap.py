@@ -364,6 +364,27 @@ def test_an_effect_left_with_model_error_alone_is_a_no_gap_verdict_with_it_state
     assert doc["verdict"] == "anisotropy"
 
 
+@pytest.mark.slow
+def test_a_soft_isotropic_support_is_model_error_not_an_anisotropy():
+    """End to end on the sweep front end: housings on a soft pedestal, the same in x and
+    y, fit as an anisotropy with nearly equal stiffnesses; the isotropic form does as
+    well, so the verdict is no-gap with the support stated as model error."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.rotor import MeasurementNoise, RotorBearingSimulator, SupportFlexibility
+
+    support = SupportFlexibility(k=4e6, mass=30.0, damping=1000.0)
+    sim = RotorBearingSimulator(effects=[support, MeasurementNoise(snr_db=35.0)], seed=3)
+    measured = sim.sweep(list(SPEEDS), fs=1000.0, n_samples=1000, settle=0.0,
+                         progress=False)[["speed", "t", "xO1", "yO1", "xA", "yA"]]
+    fast = DiagnosisSettings(update_nominal=False, n_probe=8, max_nfev=8)
+    d = diagnose(measured, candidates=("anisotropy",), settings=fast, exhaustive=True)
+    assert d["gap_before"]["per_feature"] > 10 * fast.no_gap_per_feature  # a real gap
+    assert d["verdict"] == "no-gap" and d["ranking"][0]["effect"] == []
+    fitted = d["model_error"]["support-flexibility"]
+    assert fitted == d["ranking"][0]["model_error"]["support-flexibility"]
+    assert 0.5 < fitted["k"] / support.k < 2.0
+
+
 def test_support_flexibility_is_the_anisotropy_with_equal_stiffnesses():
     from sknarx.rotor import RotorBearingSimulator, SupportAnisotropy, SupportFlexibility
 
