@@ -241,6 +241,7 @@ def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cove
     ix, iy = int(p[0]), int(p[1])
     kc, par, ang, lc = p[2], p[3], p[4], p[5]
     cd, sd, phase, whirl, phase1 = p[6], p[7], p[8], p[9], p[10]
+    jx, jy, lever = int(p[11]), int(p[12]), p[13]
     # parallel offset: a force at twice the shaft angle, (kc par / 2) e^{i direction}
     # (-1 + cos th + i whirl sin th), th = 2 phi + phase: planar along the offset with
     # its static part (whirl 0), an ellipse, or a circle (whirl +-1)
@@ -250,8 +251,14 @@ def _misalignment_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cove
     gy = whirl * math.sin(th)
     # angular: a 1x bending moment, seen at the journal as a rotating force
     f1 = kc * lc * ang
-    out[ix] += a * (cd * gx - sd * gy) - f1 * math.cos(phi + phase1)
-    out[iy] += a * (sd * gx + cd * gy) - f1 * math.sin(phi + phase1)
+    fx = a * (cd * gx - sd * gy) - f1 * math.cos(phi + phase1)
+    fy = a * (sd * gx + cd * gy) - f1 * math.sin(phi + phase1)
+    out[ix] += fx
+    out[iy] += fy
+    # the coupling's reaction across its shaft segment: the opposite force, a share
+    # ``lever`` of it, where that segment meets the rotor's next station (its disk)
+    out[jx] -= lever * fx
+    out[jy] -= lever * fy
 
 
 @dataclass(repr=False)
@@ -269,9 +276,17 @@ class Misalignment(Effect):
     the 2x reaction turns: ``whirl`` adds the quadrature component (0: planar along
     the offset, as Redmond's; +-1: a circular forward or backward 2x force, as
     Sekhar & Prabhu's coupling reaction), so the 2x force can take any ellipse and
-    phase. Signature: 2x at the drive-end journal and the disks, growing with offset
-    but not with speed; a static shift (invisible to AC-coupled probes); for angular
-    misalignment a speed-independent 1x vector.
+    phase. They also differ in where it acts: Redmond's and Sekhar & Prabhu's reaction
+    acts at the bearing (``lever = 0``); a coupling modelled as a flexible element of
+    the shaft line (Xia et al., 2019, as ROSS's ``MisalignmentFlex``) pushes its two
+    ends apart, an equal and opposite force pair across that element, of which the
+    inboard one reaches the rotor between the bearing and the next disk. ``lever``
+    (0-1) is the share of the reaction that acts, opposite, at that disk (O1 for
+    ``at='A'``, O2 for ``'B'``): a pair across a third of segment A-O1 is, to the
+    stations of this model, about ``F/3`` at the journal and ``-F/3`` at the disk
+    (``lever = 1`` with a third of the force). Signature: 2x at the drive-end journal
+    and the disks, growing with offset but not with speed; a static shift (invisible
+    to AC-coupled probes); for angular misalignment a speed-independent 1x vector.
 
     A calibration searches the offset, its direction and the 2x form (``bounds``),
     not the angular misalignment: a rotating 1x force of free size and phase at a
@@ -287,16 +302,21 @@ class Misalignment(Effect):
     phase: float = 0.0
     whirl: float = 0.0
     angular_phase: float = 0.0
+    lever: float = 0.0
     at: str = "A"
     name = "misalignment"
-    #: searched: the offset and the 2x reaction's form (not ``angular``: see above)
+    #: searched: the offset, the 2x reaction's form and where it acts (not ``angular``:
+    #: see above)
     bounds = {"parallel": (0.0, 1e-3, "lin"), "direction": (-math.pi, math.pi, "lin"),
-              "phase": (-math.pi, math.pi, "lin"), "whirl": (-1.0, 1.0, "lin")}
+              "phase": (-math.pi, math.pi, "lin"), "whirl": (-1.0, 1.0, "lin"),
+              "lever": (0.0, 1.0, "lin")}
     #: where a calibration starts the parameters (the others: a quarter into the range)
-    start = {"direction": 0.0, "phase": 0.0, "whirl": 0.0}
+    start = {"direction": 0.0, "phase": 0.0, "whirl": 0.0, "lever": 0.0}
     discrete = {"at": ("A", "B")}
+    #: the station next to each bearing end, where an inboard reaction reaches the rotor
+    INBOARD = {"A": "O1", "B": "O2"}
     units = {"parallel": "m", "angular": "rad", "direction": "rad", "phase": "rad",
-             "whirl": "-", "angular_phase": "rad", "at": ""}
+             "whirl": "-", "angular_phase": "rad", "lever": "-", "at": ""}
     signature = ("2x at every speed (not growing with speed^2), strongest at the coupled "
                  "bearing; 1x offset")
     K_C = 1e6
@@ -304,6 +324,9 @@ class Misalignment(Effect):
 
     def __post_init__(self):
         _check_choice(self, "at")
+        if not 0.0 <= self.lever <= 1.0:
+            raise ValueError(f"Misalignment: lever={self.lever!r} must lie in [0, 1] (the "
+                             "share of the coupling reaction acting at the next disk).")
 
     def force_kernel(self, context):
         p = np.array([context.dof_index["x" + self.at], context.dof_index["y" + self.at],
@@ -311,7 +334,10 @@ class Misalignment(Effect):
                       # the offset's direction enters as its cosine and sine, computed
                       # here once rather than at every force evaluation
                       math.cos(self.direction), math.sin(self.direction), self.phase,
-                      self.whirl, self.angular_phase], dtype=float)
+                      self.whirl, self.angular_phase,
+                      context.dof_index["x" + self.INBOARD[self.at]],
+                      context.dof_index["y" + self.INBOARD[self.at]], self.lever],
+                     dtype=float)
         return _misalignment_kernel, p
 
 
