@@ -199,6 +199,19 @@ def _decode(x, classes, log, combo=None):
     return nuis, effects
 
 
+def search_vector(effect) -> np.ndarray:
+    """An effect's searched parameters as the calibration's vector holds them (log10 of
+    the log-scaled ones): the inverse of :func:`_decode` for one effect."""
+    return np.array([np.log10(getattr(effect, n)) if sc == "log" else getattr(effect, n)
+                     for n, (_lo, _hi, sc) in type(effect).bounds.items()], dtype=float)
+
+
+def effect_blocks(x, classes) -> list:
+    """Each effect's slice of a calibration vector ``x`` (after the nuisances)."""
+    widths = np.cumsum([len(c.bounds) for c in classes])[:-1]
+    return np.split(np.asarray(x)[len(NUISANCE):], widths)
+
+
 def _discrete_combos(classes, fixed):
     """Every combination of the classes' discrete settings still to search (those in
     ``fixed`` are held), as tuples of one dict per class."""

@@ -34,7 +34,15 @@ import numpy as np
 import pandas as pd
 
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
-from .calibration import NUISANCE, SweepModel, calibrate, discrete_settings, heldout_gap
+from .calibration import (
+    NUISANCE,
+    SweepModel,
+    calibrate,
+    discrete_settings,
+    effect_blocks,
+    heldout_gap,
+    search_vector,
+)
 from .core import (
     CandidateFit,
     FrontEnd,
@@ -171,8 +179,9 @@ class _SweepFrontEnd(FrontEnd):
             n_params=cal.n_params - len(NUISANCE), heldout_excess=E, cmp=cmp,
             details=details, state=cal)
 
-    def _calibrate(self, names, **kw):
-        return calibrate(self.model, self.meas, self.train, [EFFECTS[n] for n in names],
+    def _calibrate(self, names, classes=None, **kw):
+        classes = classes if classes is not None else [EFFECTS[n] for n in names]
+        return calibrate(self.model, self.meas, self.train, classes,
                          **{"max_nfev": self.settings.max_nfev,
                             "jacobian_refresh": self.settings.jacobian_refresh,
                             "probe_cache": self._probe_costs, **kw})
@@ -221,12 +230,11 @@ class _SweepFrontEnd(FrontEnd):
         # merely continued): each member runs alone from the pair's fit
         x = pair.state.x
         k = len(NUISANCE)
-        width = [len(EFFECTS[n].bounds) for n in pair.names]
+        blocks = effect_blocks(x, [EFFECTS[n] for n in pair.names])
         out = []
         for member in (0, 1):
-            i = k + sum(width[:member])
             name = pair.names[member]
-            start = np.concatenate([x[:k], x[i : i + width[member]]])
+            start = np.concatenate([x[:k], blocks[member]])
             cal = self._calibrate((name,), starts=[start], n_probe=0,
                                   fixed=[discrete_settings(pair.state, member, EFFECTS[name])])
             out.append(self._result((name,), cal))
@@ -237,7 +245,7 @@ class _SweepFrontEnd(FrontEnd):
         # their fit and discrete settings: only the restriction is tested
         k = len(NUISANCE)
         classes = [EFFECTS[n] for n in fit.names]
-        blocks = np.split(fit.state.x[k:], np.cumsum([len(c.bounds) for c in classes])[:-1])
+        blocks = effect_blocks(fit.state.x, classes)
         out = []
         for i, cls in enumerate(classes):
             if cls.linear_form is None:
@@ -245,13 +253,10 @@ class _SweepFrontEnd(FrontEnd):
             form = cls(**fit.state.effect_params[i]).linear_form_of()
             swapped = [*classes[:i], cls.linear_form, *classes[i + 1:]]
             start = np.concatenate([fit.state.x[:k], *blocks[:i],
-                                    _search_values(form), *blocks[i + 1:]])
+                                    search_vector(form), *blocks[i + 1:]])
             fixed = [None if j == i else discrete_settings(fit.state, j, c)
                      for j, c in enumerate(classes)]
-            cal = calibrate(self.model, self.meas, self.train, swapped, starts=[start],
-                            n_probe=0, fixed=fixed, max_nfev=self.settings.max_nfev,
-                            jacobian_refresh=self.settings.jacobian_refresh,
-                            probe_cache=self._probe_costs)
+            cal = self._calibrate(fit.names, swapped, starts=[start], n_probe=0, fixed=fixed)
             out.append(self._result(fit.names[:i] + fit.names[i + 1:], cal, swapped))
         return out
 
@@ -404,13 +409,6 @@ def _plain_params(classes, effect_params):
     per-probe runout vectors, through their ``to_dict``)."""
     return [c(**p).to_dict() if getattr(c, "projected_orders", None) else p
             for c, p in zip(classes, effect_params, strict=True)]
-
-
-def _search_values(effect):
-    """An effect's searched parameters as the calibration's vector holds them (log10
-    of the log-scaled ones)."""
-    return np.array([np.log10(getattr(effect, n)) if sc == "log" else getattr(effect, n)
-                     for n, (_lo, _hi, sc) in type(effect).bounds.items()], dtype=float)
 
 
 def _noise_summary(meas):
