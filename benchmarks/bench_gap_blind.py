@@ -152,7 +152,8 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
         "effect_gap": e_eff / max(n_eff, 1),
         "ranking": [{"effect": r["effect"], "shrink": r["shrink"], "log_shrink": r["log_shrink"],
                      "E": r["heldout_gap_after"], "score": r["score"], "params": r["params"],
-                     **({"model_error": r["model_error"]} if r.get("model_error") else {})}
+                     **{k: r[k] for k in ("model_error", "replaces", "linear_form_tests")
+                        if r.get(k)}}
                     for r in d["ranking"]],
         "nominal_update": {"updates": upd.get("updates", []),
                            "changes": {p["parameter"]: p["change"]

@@ -252,14 +252,17 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
        each of up to ``n_partners`` partners (``front.partners``, ``front.fit_pair``);
        each member of the best pair is then refitted alone from it
        (``front.refit_members``) and replaces its single fit where it does better.
-    4. Effect or model error: each member of the preferred candidate that has a linear
-       form (an anisotropy's is the isotropic support) is refitted in that form
-       (``front.linear_forms``). Where that form scores as well (held-out excess plus
-       two per parameter: the restriction costs at most the parameter it saves), the
-       member changed the linear rotor only -- model error by the rule that separates
-       the two, however much it removed -- and the candidate is replaced by its other
-       members with the model error stated (none left: model error alone). Repeated
-       while the preferred candidate changes.
+    4. Effect or model error: each member that has a linear form (an anisotropy's is
+       the isotropic support) of the best single and of the best pair -- the two
+       candidates :func:`preferred` chooses between, whatever its thresholds -- is
+       refitted in that form (``front.linear_forms``). Where that form scores as well
+       (held-out excess plus two per parameter: the restriction costs at most the
+       parameter it saves), the member changed the linear rotor only -- model error by
+       the rule that separates the two, however much it removed -- and the candidate is
+       replaced by its other members with the model error stated (none left: model
+       error alone); the replacement's entry says what it replaced (``replaces``), a
+       candidate that passed says so (``linear_form_tests``). Repeated until the best
+       single and the best pair have both been tested.
     """
     tick = tick or (lambda msg: None)
     singles = run_parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
@@ -287,38 +290,57 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
                 singles = [new if f.names == new.names
                            and new.heldout_excess < f.heldout_excess else f for f in singles]
         tick("pairs")
-    return _without_linear_members(front, singles + pairs, E0, cmp0, n_features, settings,
-                                   tick)
+    return _without_linear_members(front, singles + pairs, E0, cmp0, tick)
 
 
-def _without_linear_members(front, fits, E0, cmp0, n_features, settings, tick):
-    """Step 4 of :func:`search`: the ranking, its preferred candidate's members that only
-    change the linear rotor replaced by that model error."""
+def _contenders(ranked: list) -> list:
+    """The best single (model error alone counts as one) and the best pair of a
+    ranking: whatever its thresholds, :func:`preferred` chooses between these two."""
+    out = []
+    for keep in (lambda n: n <= 1, lambda n: n == 2):
+        group = [r for r in ranked if keep(len(effect_names(r)))]
+        if group:
+            out.append(min(group, key=lambda r: r["score"]))
+    return out
+
+
+def _without_linear_members(front, fits, E0, cmp0, tick):
+    """Step 4 of :func:`search`: the ranking, with the members of its contenders that
+    only change the linear rotor replaced by that model error."""
     ranked = rank(fits, E0, cmp0)
     tested = set()
-    while (choice := preferred(ranked, settings, n_features)) is not None:
-        fit = choice["_fit"]
-        if fit.names in tested:
-            break
+    # model error alone (no member left) has nothing to test
+    while todo := [r for r in _contenders(ranked)
+                   if r["_fit"].names and r["_fit"].names not in tested]:
+        entry = todo[0]
+        fit = entry["_fit"]
         tested.add(fit.names)
         alts = front.linear_forms(fit)
         if alts:
             tick("effect or model error: " + "+".join(fit.names))
         for alt in alts:
-            if alt.heldout_excess + 2.0 * alt.n_params > choice["score"]:
-                continue  # the member did more than a linear change could: an effect
+            member = ", ".join(n for n in fit.names if n not in alt.names)
+            form = ", ".join(alt.details["model_error"])
+            score = alt.heldout_excess + 2.0 * alt.n_params
+            if score > entry["score"]:
+                # the member did more than a linear change could: an effect
+                fit.details.setdefault("linear_form_tests", []).append(
+                    {"member": member, "linear_form": form, "heldout_gap_after":
+                     alt.heldout_excess, "score": score, "outcome": "effect"})
+                continue
             logger.info("%s: the %s did no more than %s (held-out excess %.4g against "
-                        "%.4g): model error, not an effect", "+".join(fit.names),
-                        ", ".join(n for n in fit.names if n not in alt.names),
-                        ", ".join(alt.details["model_error"]), alt.heldout_excess,
-                        fit.heldout_excess)
+                        "%.4g): model error, not an effect", "+".join(fit.names), member,
+                        form, alt.heldout_excess, fit.heldout_excess)
+            alt.details["replaces"] = {"effect": list(fit.names), "member": member,
+                                       "heldout_gap_after": fit.heldout_excess,
+                                       "score": entry["score"]}
             # the candidate gives way to its linear form, which also takes the place of
             # a worse fit of the same members
             fits = [f for f in fits if f is not fit
                     and not (f.names == alt.names and f.heldout_excess >= alt.heldout_excess)]
             fits.append(alt)
-            ranked = rank(fits, E0, cmp0)
             break
+        ranked = rank(fits, E0, cmp0)
     return ranked
 
 

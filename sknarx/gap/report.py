@@ -121,6 +121,20 @@ def _model_error_text(error) -> str:
                      for name, values in (error or {}).items())
 
 
+def _linear_form_text(entry) -> str:
+    """What the effect-or-model-error test (``sknarx.gap.core.search``, step 4) found for
+    a ranking entry: the candidate it replaced, or the linear forms it beat."""
+    parts = []
+    if r := entry.get("replaces"):
+        parts.append(f"replaces {_label(r['effect'])}: its {r['member']} did no more than "
+                     f"this linear change (held-out excess {r['heldout_gap_after']:.4g} "
+                     f"with it)")
+    for t in entry.get("linear_form_tests", []):
+        parts.append(f"{t['member']} tested against its linear form {t['linear_form']}: "
+                     f"an effect (the linear form leaves {t['heldout_gap_after']:.4g})")
+    return "; ".join(parts)
+
+
 
 def effect_parameters(effect, params) -> str:
     """Fitted parameters with units; a value on its search bound is flagged."""
@@ -201,7 +215,8 @@ def _html(doc, figs, prov):
           quantity(r["heldout_gap_after"]),
           "; ".join(t for t in (effect_parameters(r["effect"], r["params"]),
                                 _model_error_text(r.get("model_error"))) if t),
-          "; ".join(r["evidence"])] for r in doc["ranking"]),
+          "; ".join([*r["evidence"], *filter(None, [_linear_form_text(r)])])]
+         for r in doc["ranking"]),
         ["candidate", "held-out gap removed", "held-out excess after", "fitted parameters",
          "evidence"],
         empty=("No candidate was fitted: the gap is within the no-gap floor, so there is "
