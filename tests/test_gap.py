@@ -468,13 +468,15 @@ def test_calibration_escapes_the_wrong_basin_of_a_crack_angle():
 
 @pytest.mark.slow
 def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_absorbed():
-    # crack seed 21: the nuisance-only fit absorbs part of the crack in the stiffness
-    # scale (0.86 when harmonics had no model-form tolerance, 0.92 with it; the rig's is
-    # 1.01); a crack started there converged to a held-out gap of ~6,600 against the
-    # truth's ~70 (shrink 0.58 -> unexplained)
+    # the nuisance-only fit absorbs part of a crack in the stiffness scale. Seed 21 (0.92
+    # for the rig's 1.01): a crack started there converged to a held-out gap of ~6,600
+    # against the truth's ~70 (shrink 0.58 -> unexplained). Since the top speed step is
+    # always calibrated (core.alternating_split) seed 21 absorbs only 3 %; seed 22
+    # absorbs 18 % (1.149, on the bound, for the rig's 0.975; measured: fitted 0.953,
+    # shrink 0.999 against the oracle's 0.998)
     from sknarx.testing import oracle_gap
 
-    measured, truth = make_trial("crack", 21)
+    measured, truth = make_trial("crack", 22)
     d = diagnose(measured, candidates=("crack",))
     absorbed = d["nuisance"]["calibrated"]["stiffness_scale"]
     assert abs(absorbed / truth["nuisance"]["stiffness_scale"] - 1) > 0.05  # the trap is there
@@ -490,9 +492,9 @@ def test_candidates_start_from_nominal_stiffness_not_from_what_the_nuisance_fit_
               * best["params"]["element_scale"])
     rig, trap = truth["nuisance"]["stiffness_scale"], absorbed
     assert abs(fitted - rig) < 0.5 * abs(trap - rig)
-    # within 3 % while harmonics had to agree to the noise; with the 30 % harmonic
-    # tolerance (gapmap.HARMONIC_RTOL) the 2x sets the depth less tightly and depth and
-    # element stiffness trade: +4.4 % (depth 0.47 for 0.42), the trap at -8.8 %
+    # seed 21: within 3 % while harmonics had to agree to the noise; with the 30 %
+    # harmonic tolerance (gapmap.HARMONIC_RTOL) the 2x sets the depth less tightly and
+    # depth and element stiffness trade: +4.4 % (depth 0.47 for 0.42); seed 22: -2.3 %
     assert abs(fitted / rig - 1) < 0.06
 
 

@@ -43,9 +43,22 @@ _KEY = ["speed", "window", "channel", "feature"]
 
 def alternating_split(n: int, block: int = 1) -> np.ndarray:
     """Training mask of ``n`` speed-ordered units: alternating blocks of ``block`` units,
-    the first for training. The held-out units lie between training ones, so a fit is
-    judged where it interpolates, never where it extrapolates."""
-    return (np.arange(n) // block) % 2 == 0
+    the first for training, and the last unit always for training. The held-out units lie
+    between training ones, so a fit is judged where it interpolates, never where it
+    extrapolates (with an even count of single steps the plain alternation held out the
+    top speed, above every training one).
+
+    Examples
+    --------
+    >>> alternating_split(6).astype(int).tolist()
+    [1, 0, 1, 0, 1, 1]
+    >>> alternating_split(7, block=2).astype(int).tolist()
+    [1, 1, 0, 0, 1, 1, 1]
+    """
+    train = (np.arange(n) // block) % 2 == 0
+    if n:
+        train[-1] = True
+    return train
 
 
 def shrink(before: float, after: float) -> float:

@@ -58,8 +58,8 @@ def check_measured(df: pd.DataFrame, channels=None):
                          "metres (not um or mils)?")
     speeds = np.unique(df["speed"])
     if speeds.size < 4:
-        raise ValueError(f"{speeds.size} speed step(s): at least 4 are needed (half to calibrate, "
-                         "half held out).")
+        raise ValueError(f"{speeds.size} speed step(s): at least 4 are needed (every other one to "
+                         "calibrate, the others held out between them).")
     sizes, rates = [], []
     for w, g in df.groupby("speed"):
         dt = np.diff(g["t"].to_numpy())
