@@ -38,8 +38,9 @@ class _Setup:
     brg: np.ndarray
     kernel: object
     kparams: np.ndarray
-    q_static: np.ndarray
-    context: object  # the EffectContext the effects were given (their measure sees it too)
+    # the EffectContext the effects were given (their measure sees it too); it holds the
+    # static equilibrium the runs start from (context.q_static)
+    context: object
 
 
 class RotorBearingSimulator:
@@ -140,7 +141,7 @@ class RotorBearingSimulator:
 
     def static_equilibrium(self) -> np.ndarray:
         """Displacements (m, rad) at rest under gravity, bearings included."""
-        return self._setup.q_static
+        return self._setup.context.q_static
 
     def _static(self):
         p, m = self.effective_params, self.matrices
@@ -195,8 +196,7 @@ class RotorBearingSimulator:
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
-                      brg=brg, kernel=kernel, kparams=kparams, q_static=q_static,
-                      context=ctx)
+                      brg=brg, kernel=kernel, kparams=kparams, context=ctx)
 
     def linear_model(self) -> LinearRotorModel:
         """The rotor with its bearings linearised about the static equilibrium."""
@@ -281,7 +281,8 @@ class RotorBearingSimulator:
         phi0 = -float(np.sum(0.5 * (w[1 : n_settle + 1] + w[:n_settle])) * dt)
         stop = w.size - 1 if stop is None else stop
         record_from = min(n_settle, stop)
-        q0, v0 = ((s.q_static.copy(), np.zeros(s.q_static.size)) if state is None else
+        q_static = s.context.q_static
+        q0, v0 = ((q_static.copy(), np.zeros(q_static.size)) if state is None else
                   self._adapt_state(state))
         Q, U, PHI, status, q_end, v_end = integrate(
             q0, v0, np.ascontiguousarray(w[: stop + 1], dtype=float), phi0,
@@ -309,13 +310,13 @@ class RotorBearingSimulator:
         pedestals (a calibration continues one candidate's settled runs with another's):
         housings a state lacks start at rest on their static deflection."""
         q, v = (np.array(a, dtype=float) for a in state)
-        n = self._setup.q_static.size
+        n = self._setup.context.q_static.size
         sizes = (len(DOF_NAMES), len(DOF_NAMES) + len(HOUSING_NAMES))
         if q.shape != v.shape or q.ndim != 1 or q.size not in sizes:
             raise ValueError(f"state must be (q, v) of {sizes[0]} or {sizes[1]} values each; "
                              f"got shapes {q.shape}, {v.shape}.")
         if q.size < n:
-            q = np.r_[q, self._setup.q_static[q.size:]]
+            q = np.r_[q, self._setup.context.q_static[q.size:]]
             v = np.r_[v, np.zeros(n - v.size)]
         return q[:n].copy(), v[:n].copy()
 
