@@ -136,12 +136,13 @@ def _gap(args) -> int:
 
 
 def _unbalance(args) -> int:
-    from .gap.unbalance_run import run_unbalance
+    from .gap.unbalance_run import identify_unbalance, write_unbalance_outputs
     from .rotor.config import load_config
 
     out = _check_out(args.out)
     cfg = load_config(args.rotor)
-    doc = run_unbalance(args.features, cfg, out, _command_line())
+    doc = write_unbalance_outputs(identify_unbalance(args.features, cfg), out,
+                                  _command_line())
     cv = doc["cross_validation"]["methods"]["model-based (this package)"]
     print(f"leave-one-condition-out on {doc['cross_validation']['n_conditions']} labelled "
           f"conditions: MAE {cv['mae_gmm']:.2f} g mm, detection {100 * cv['detection']:.0f} %, "

@@ -1,10 +1,13 @@
-"""``sknarx unbalance``: identify, cross-validate against two peers, predict the unlabelled
-conditions, write ``predictions.csv``, ``unbalance.json`` and ``report.html``."""
+"""``sknarx unbalance``: identify, cross-validate against two peers and predict the
+unlabelled conditions (:func:`identify_unbalance`, which writes nothing); the caller
+writes ``predictions.csv``, ``unbalance.json`` and ``report.html``
+(:func:`write_unbalance_outputs`)."""
 
 from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +25,8 @@ from .unbalance import (
     scores,
 )
 
-__all__ = ["run_unbalance", "PENALTIES", "THRESHOLDS"]
+__all__ = ["UnbalanceStudy", "identify_unbalance", "write_unbalance_outputs", "PENALTIES",
+           "THRESHOLDS"]
 
 logger = logging.getLogger(__name__)
 
@@ -67,9 +71,29 @@ def _peers(campaign, trial_runs, seed=0):
     return {k: np.array(v) for k, v in out.items()}, lab.U
 
 
-def run_unbalance(features, cfg: dict, out, command: str,
-                  trial_runs=("A007", "A015")) -> dict:
-    """Fit, cross-validate, predict and write the outputs; returns the JSON document."""
+@dataclass
+class UnbalanceStudy:
+    """What :func:`identify_unbalance` found: the JSON-able ``document`` (every key of
+    ``unbalance.json`` but ``provenance``, which the writer adds), the ``predictions``
+    table of the unlabelled conditions (``U_gmm`` in g mm, angles in deg), and the fitted
+    ``model``, its ``rig``, the ``campaign`` and the unlabelled part (``blind``, with its
+    identified unbalance ``U``, g mm) the report's figures are drawn from."""
+
+    document: dict
+    predictions: pd.DataFrame
+    model: UnbalanceModel
+    rig: RigInfluenceModel
+    campaign: object
+    blind: object
+    U: np.ndarray
+
+    def __getitem__(self, key):
+        return self.document[key]
+
+
+def identify_unbalance(features, cfg: dict, trial_runs=("A007", "A015")) -> UnbalanceStudy:
+    """Fit, cross-validate against the peers and predict the unlabelled conditions of a
+    campaign's 1x features; nothing is written."""
     campaign = load_campaign(features)
     probes = tuple(dict.fromkeys(p for _, p in campaign.channels))
     rig = RigInfluenceModel(cfg, campaign.speeds_rpm, probes)
@@ -110,11 +134,6 @@ def run_unbalance(features, cfg: dict, out, command: str,
                          "loaded": bool(mag >= best_t), "U_std_gmm": sd,
                          "angle_std_deg": float(min(np.degrees(sd / mag), 180.0))
                          if mag > 0 else 180.0})
-    pred = pd.DataFrame(rows)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    pred.to_csv(out / "predictions.csv", index=False)
-    prov = provenance(command)
     doc = {
         "predictions": rows,
         "cross_validation": {"scheme": "leave one condition out (its repeats and both "
@@ -133,12 +152,21 @@ def run_unbalance(features, cfg: dict, out, command: str,
                   "channel_noise": dict(zip([f"{s} {p}" for s, p in campaign.channels],
                                             np.sqrt(model.sigma2_).tolist(), strict=True))},
         "speeds_rpm": campaign.speeds_rpm,
-        "provenance": prov,
     }
-    doc = json_safe(doc)
+    return UnbalanceStudy(document=doc, predictions=pd.DataFrame(rows), model=model,
+                          rig=rig, campaign=campaign, blind=blind, U=U)
+
+
+def write_unbalance_outputs(study: UnbalanceStudy, out, command: str) -> dict:
+    """Write ``predictions.csv``, ``unbalance.json`` (the study's document with its
+    provenance) and ``report.html`` with its figure into ``out``; returns the document."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    study.predictions.to_csv(out / "predictions.csv", index=False)
+    doc = json_safe({**study.document, "provenance": provenance(command)})
     (out / "unbalance.json").write_text(json.dumps(doc, indent=1))
-    figs = _figures(out, model, blind, U)
-    (out / "report.html").write_text(_html(doc, figs, rig, campaign))
+    figs = _figures(out, study.model, study.blind, study.U)
+    (out / "report.html").write_text(_html(doc, figs, study.rig, study.campaign))
     return doc
 
 
