@@ -593,6 +593,14 @@ def test_each_probe_has_its_own_runout_with_a_2x_and_it_is_found_per_probe():
     d = diagnose(measured, candidates=("runout", "crack"))
     assert d["verdict"] == "runout", [(r["effect"], r["shrink"]) for r in d["ranking"]]
     assert d["shrink"] > 0.8
+    # the crack's stations, each converged, are reported with their held-out excess,
+    # best first (the one its parameters belong to)
+    crack = next(r for r in d["ranking"] if r["effect"] == "crack")
+    rows = crack["discrete_settings"]
+    assert sorted(r["setting"]["crack"]["station"] for r in rows) == ["A-O1", "O2-B", "joint"]
+    assert rows[0]["setting"]["crack"]["station"] == crack["params"]["station"]
+    assert rows[0]["heldout_gap_after"] == crack["heldout_gap_after"]
+    assert [r["heldout_gap_after"] for r in rows] == sorted(r["heldout_gap_after"] for r in rows)
     for ch, vecs in truth.items():
         est = d["ranking"][0]["params"][ch]
         # a constant vector is told apart from the rotor's own 1x only as well as the

@@ -43,3 +43,17 @@ def test_provenance_and_page():
 def test_an_empty_table_says_why():
     assert "nothing significant" in table([], ["a"], empty="nothing significant")
     assert "<table>" in table([[1, "x"]], ["a", "b"])
+
+
+def test_what_the_search_tested_reads_in_the_ranking_table_even_for_a_diverged_fit():
+    from sknarx.gap.report import _discrete_text, _linear_form_text
+
+    entry = {"discrete_settings": [
+        {"setting": {"crack": {"station": "A-O1"}}, "heldout_gap_after": 120.25},
+        {"setting": {"crack": {"station": "O2-B"}}, "heldout_gap_after": "inf"}],
+        "linear_form_tests": [{"member": "anisotropy", "linear_form": "support-flexibility",
+                               "heldout_gap_after": 310.0, "score": 316.0,
+                               "outcome": "effect"}]}
+    assert _discrete_text(entry) == "held-out excess by setting: crack A-O1 120.2; crack O2-B inf"
+    assert "support-flexibility: an effect (the linear form leaves 310)" in _linear_form_text(entry)
+    assert _discrete_text({}) == _linear_form_text({}) == ""

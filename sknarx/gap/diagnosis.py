@@ -190,9 +190,19 @@ class _SweepFrontEnd(FrontEnd):
         # each discrete setting (a crack's station, a rub's disk) converged on the
         # training speeds and chosen, as candidates are, on the held-out ones: the
         # training cost barely tells stations apart (see calibrate)
-        fits = [self._result(names, cal)
-                for cal in self._calibrate(names, each_discrete=True, **kw)]
-        return min(fits, key=lambda f: (f.heldout_excess, f.state.cost))
+        fits = sorted((self._result(names, cal)
+                       for cal in self._calibrate(names, each_discrete=True, **kw)),
+                      key=lambda f: (f.heldout_excess, f.state.cost))
+        if len(fits) > 1:
+            # what the data say about the setting: each one's held-out excess, so a
+            # setting the held-out speeds barely separate is seen as such
+            classes = [EFFECTS[n] for n in names]
+            fits[0].details["discrete_settings"] = [
+                {"setting": {c.name: discrete_settings(f.state, i, c)
+                             for i, c in enumerate(classes) if c.discrete},
+                 "heldout_gap_after": f.heldout_excess, "training_cost": f.state.cost}
+                for f in fits]
+        return fits[0]
 
     def fit(self, names):
         return self._best(names, starts=[self.nuis_start], n_probe=self.settings.n_probe)

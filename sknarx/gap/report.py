@@ -121,17 +121,37 @@ def _model_error_text(error) -> str:
                      for name, values in (error or {}).items())
 
 
+def _excess(value) -> str:
+    """A held-out excess (dimensionless) as text; a diverged fit's is 'inf' (a string
+    once the document is JSON-safe)."""
+    return f"{value:.4g}" if isinstance(value, (int, float)) else str(value)
+
+
+def _discrete_text(entry) -> str:
+    """How well the held-out speeds told a candidate's discrete settings apart."""
+    rows = entry.get("discrete_settings")
+    if not rows:
+        return ""
+
+    def label(setting):
+        return ", ".join(f"{name} {v}" for name, fields in setting.items()
+                         for v in fields.values())
+
+    return ("held-out excess by setting: "
+            + "; ".join(f"{label(r['setting'])} {_excess(r['heldout_gap_after'])}" for r in rows))
+
+
 def _linear_form_text(entry) -> str:
     """What the effect-or-model-error test (``sknarx.gap.core.search``, step 4) found for
     a ranking entry: the candidate it replaced, or the linear forms it beat."""
     parts = []
     if r := entry.get("replaces"):
         parts.append(f"replaces {_label(r['effect'])}: its {r['member']} did no more than "
-                     f"this linear change (held-out excess {r['heldout_gap_after']:.4g} "
+                     f"this linear change (held-out excess {_excess(r['heldout_gap_after'])} "
                      f"with it)")
     for t in entry.get("linear_form_tests", []):
         parts.append(f"{t['member']} tested against its linear form {t['linear_form']}: "
-                     f"an effect (the linear form leaves {t['heldout_gap_after']:.4g})")
+                     f"an effect (the linear form leaves {_excess(t['heldout_gap_after'])})")
     return "; ".join(parts)
 
 
@@ -215,7 +235,8 @@ def _html(doc, figs, prov):
           quantity(r["heldout_gap_after"]),
           "; ".join(t for t in (effect_parameters(r["effect"], r["params"]),
                                 _model_error_text(r.get("model_error"))) if t),
-          "; ".join([*r["evidence"], *filter(None, [_linear_form_text(r)])])]
+          "; ".join([*r["evidence"], *filter(None, [_discrete_text(r),
+                                                     _linear_form_text(r)])])]
          for r in doc["ranking"]),
         ["candidate", "held-out gap removed", "held-out excess after", "fitted parameters",
          "evidence"],
