@@ -329,8 +329,9 @@ def _without_linear_members(front, fits, E0, cmp0, tick):
         fit = entry["_fit"]
         tested.add(fit.names)
         alts = front.linear_forms(fit)
-        if alts:
-            tick("effect or model error: " + "+".join(fit.names))
+        if not alts:
+            continue  # no member has a linear form: nothing changed, nothing to re-rank
+        tick("effect or model error: " + "+".join(fit.names))
         for alt in alts:
             member = ", ".join(n for n in fit.names if n not in alt.names)
             form = ", ".join(alt.details["model_error"])
@@ -353,6 +354,7 @@ def _without_linear_members(front, fits, E0, cmp0, tick):
                     and not (f.names == alt.names and f.heldout_excess >= alt.heldout_excess)]
             fits.append(alt)
             break
+        # the tested candidate's entry (or its replacement) carries what the test found
         ranked = rank(fits, E0, cmp0)
     return ranked
 

@@ -87,9 +87,6 @@ class UnbalanceStudy:
     blind: object
     U: np.ndarray
 
-    def __getitem__(self, key):
-        return self.document[key]
-
 
 def identify_unbalance(features, cfg: dict, trial_runs=("A007", "A015")) -> UnbalanceStudy:
     """Fit, cross-validate against the peers and predict the unlabelled conditions of a

@@ -364,6 +364,13 @@ def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
         out[int(p[10 + 2 * k])] += fy * p[11 + 2 * k]
 
 
+def _joint_lateral_stiffness(params) -> float:
+    """The bolted joint's stiffness on the disks' relative lateral displacement
+    ``w_O2 - w_O1 - d/2 (slope_O1 + slope_O2)``, N/m: the shaft element through the joint
+    (``12 E I / d^3 = k``, ``matrices.py``) in parallel with the contact ``kb``."""
+    return params.k + params.kb
+
+
 def _crack_element(station, params, dof):
     """Stiffness of the cracked element's lateral mode and its deformation per plane.
 
@@ -384,7 +391,7 @@ def _crack_element(station, params, dof):
         y = {"yO2": -1.0, "txO2": p.b2, "yB": 1.0}
     elif station == "joint":
         d = p.a2 - p.a1
-        k = p.k + p.kb
+        k = _joint_lateral_stiffness(p)
         x = {"xO1": -1.0, "tyO1": -d / 2, "xO2": 1.0, "tyO2": -d / 2}
         y = {"yO1": -1.0, "txO1": d / 2, "yO2": 1.0, "txO2": d / 2}
     else:  # BreathingCrack checks its station when it is made
@@ -506,7 +513,7 @@ class JointLooseness(Effect):
         d = P.a2 - P.a1
         # the Euler-Bernoulli element through the joint is 12EI/d^3 = k on the relative
         # lateral displacement plus EI/d = k d^2/12 on the relative tilt
-        return _looseness_kernel, np.array([loss * (P.k + P.kb),
+        return _looseness_kernel, np.array([loss * _joint_lateral_stiffness(P),
                                             loss * (P.k_theta + P.k * d * d / 12.0),
                                             d, self.gap])
 
