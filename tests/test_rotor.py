@@ -207,6 +207,42 @@ def test_effects_compose_without_touching_the_integrator():
     assert amp(c, "xO2")[0] < amp(b, "xO2")[0]
 
 
+def test_every_combination_of_built_in_effects_runs_one_compiled_integrator():
+    # numba compiles the integrator anew for each kernel it is handed (about 5 s a
+    # time): the package's own kernels go in as one program of one dispatcher, so a
+    # search over effects and pairs compiles it once; a user's kernel is chained after
+    from sknarx.rotor.effects import _builtin_forces, compose_force_kernels
+    from sknarx.rotor.integrator import integrate
+    from sknarx.testing import ThermalBow
+
+    kw = dict(fs=1000.0, n_samples=200, settle=0.1)
+    effects = [R.BreathingCrack(depth=0.3), R.Rub(clearance=2e-4),
+               R.Misalignment(parallel=2e-4), R.JointLooseness(residual=0.01, gap=1e-6)]
+    R.RotorBearingSimulator(effects=effects[:1]).simulate_columns(150.0, **kw)
+    compiled = len(integrate.signatures)
+    for combo in ([], effects[1:2], effects[2:4], effects):
+        sim = R.RotorBearingSimulator(effects=combo)
+        assert sim._setup.kernel is _builtin_forces
+        sim.simulate_columns(150.0, **kw)
+    assert len(integrate.signatures) == compiled
+
+    # the program adds what each kernel adds on its own; a user's kernel is added too
+    ctx = R.RotorBearingSimulator()._setup.context
+    q, v = np.linspace(-1e-4, 1e-4, 12), np.linspace(1e-3, -1e-3, 12)
+    bow = ThermalBow(bow=1e-4, angle=0.3)
+    parts = [e.force_kernel(ctx) for e in [*effects, bow]]
+
+    def forces(kernel, p):
+        out = np.zeros(12)
+        kernel(0.01, 0.7, 150.0, 0.0, q, v, p, out)
+        return out
+
+    alone = sum(forces(k, np.asarray(p, dtype=float)) for k, p in parts)
+    assert np.any(alone != 0.0)
+    np.testing.assert_allclose(forces(*compose_force_kernels(parts)), alone,
+                               rtol=1e-12, atol=1e-12 * np.max(np.abs(alone)))
+
+
 def test_measurement_effects_runout_and_noise():
     kw = dict(fs=1000.0, n_samples=2000, settle=1.0)
     clean = R.RotorBearingSimulator().simulate(100.0, **kw)

@@ -311,6 +311,17 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     >>> diagnose(measured)["verdict"]  # doctest: +SKIP
     'no-gap'
     """
+    from threadpoolctl import threadpool_limits
+
+    # each evaluation runs its speeds on two threads; a BLAS that threads its small
+    # solves as well (the features' least squares) fights them for the two cores:
+    # measured, one evaluation of 10 speeds 50 ms with one BLAS thread, 100 ms with two
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(measured, base, channels, candidates, settings, progress,
+                         exhaustive)
+
+
+def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive):
     from .measured import check_measured
 
     settings = settings or DiagnosisSettings()

@@ -6,8 +6,9 @@ An effect acts at one (or more) of four places in the data flow:
    clearance);
 2. **forces** -- it adds generalised forces through a numba-compiled kernel
    ``kernel(t, phi, omega, alpha, q, v, params, out)`` (rub, misalignment, crack,
-   joint looseness, support flexibility); the simulator chains the kernels of all
-   active effects into the integrator's single hook;
+   joint looseness); the simulator composes the kernels of all active effects into
+   the integrator's single hook (the package's own as one program of one compiled
+   dispatcher, see :func:`compose_force_kernels`);
 3. **speed** -- it changes the speed profile (speed fluctuation);
 4. **measurement** -- it changes what the probes see (runout, noise).
 
@@ -26,7 +27,6 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from .integrator import no_extra_force
 from .parameters import DOF_NAMES
 from .pedestals import JOURNAL_OF, Pedestals
 
@@ -648,14 +648,52 @@ class SupportFlexibility(Effect):
 SupportAnisotropy.linear_form = SupportFlexibility
 
 
+@njit(nogil=True, cache=True)
+def _builtin_forces(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    # p is a force program: the number of kernels, then (code, size, parameters) of
+    # each, the code indexing _BUILTIN_KERNELS
+    i = 1
+    for _ in range(int(p[0])):
+        code, size = int(p[i]), int(p[i + 1])
+        kp = p[i + 2 : i + 2 + size]
+        if code == 0:
+            _rub_kernel(t, phi, omega, alpha, q, v, kp, out)
+        elif code == 1:
+            _misalignment_kernel(t, phi, omega, alpha, q, v, kp, out)
+        elif code == 2:
+            _crack_kernel(t, phi, omega, alpha, q, v, kp, out)
+        elif code == 3:
+            _looseness_kernel(t, phi, omega, alpha, q, v, kp, out)
+        i += 2 + size
+
+
+#: the kernels :func:`_builtin_forces` dispatches to, in the order of their codes
+_BUILTIN_KERNELS = (_rub_kernel, _misalignment_kernel, _crack_kernel, _looseness_kernel)
+
+
 def compose_force_kernels(kernels):
-    """One kernel that calls every ``(kernel, params)`` in turn; params are concatenated."""
-    if not kernels:
-        return no_extra_force, np.zeros(1)
-    funcs = tuple(k for k, _ in kernels)
-    sizes = tuple(int(np.size(p)) for _, p in kernels)
-    params = np.concatenate([np.asarray(p, dtype=float).ravel() for _, p in kernels])
-    return _chain(funcs, sizes), params
+    """One kernel that adds the forces of every ``(kernel, params)``; its parameters.
+
+    The package's own kernels become one program of :func:`_builtin_forces`, the same
+    compiled function whatever the effects: numba compiles the integrator anew for
+    each distinct kernel it is handed (about 5 s a time), so a search over effects and
+    their pairs would otherwise compile once per combination. Other kernels (an
+    :class:`Effect` of the user's) are chained after it.
+    """
+    program = [0.0]
+    custom = []
+    for kernel, p in kernels:
+        p = np.asarray(p, dtype=float).ravel()
+        if kernel in _BUILTIN_KERNELS:
+            program[0] += 1
+            program += [_BUILTIN_KERNELS.index(kernel), p.size, *p]
+        else:
+            custom.append((kernel, p))
+    if not custom:
+        return _builtin_forces, np.array(program)
+    funcs = (_builtin_forces, *(k for k, _ in custom))
+    sizes = (len(program), *(p.size for _, p in custom))
+    return _chain(funcs, sizes), np.concatenate([program, *(p for _, p in custom)])
 
 
 @lru_cache(maxsize=64)
