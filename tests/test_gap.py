@@ -837,3 +837,18 @@ def test_a_secant_jacobian_least_squares_reaches_the_differenced_one_s_minimum()
     assert jac.n_differenced < jac._calls  # the secant steps did some of the work
     with pytest.raises(ValueError, match="refresh"):
         SecantJacobian(rosenbrock, lo, hi, refresh=0)
+
+
+def test_diagnose_keeps_blas_to_one_thread_under_its_simulation_threads(monkeypatch):
+    # the evaluations run their speeds on two threads; a BLAS threading its small
+    # solves as well halves the throughput on two cores, whoever calls diagnose
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import sknarx.gap.diagnosis as D
+
+    seen = []
+    monkeypatch.setattr(D, "_diagnose", lambda *a: seen.append(
+        [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]))
+    with threadpool_limits(limits=2, user_api="blas"):
+        D.diagnose(None)
+    assert seen and seen[0] and all(n == 1 for n in seen[0])
