@@ -839,6 +839,40 @@ def test_a_secant_jacobian_least_squares_reaches_the_differenced_one_s_minimum()
         SecantJacobian(rosenbrock, lo, hi, refresh=0)
 
 
+@given(st.integers(0, 2**31 - 1))
+def test_a_settled_stop_ends_within_a_small_share_of_the_uncertainty(seed):
+    """A noisy exponential decay fitted from far off: the run that stops once a step
+    moves no parameter by 0.1 of its standard error ends within 0.5 of each standard
+    error of the fully converged fit, on fewer evaluations."""
+    from scipy.optimize import least_squares
+
+    from sknarx.gap.jacobian import SecantJacobian, SettledStop
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 3.0, 40)
+    y = 2.0 * np.exp(-1.3 * t) + 0.5 * t * np.sin(3 * t) * 0.05 + rng.normal(0, 0.05, t.size)
+
+    def resid(x):
+        return (x[0] * np.exp(-x[1] * t) + x[2] - y) / 0.05
+
+    lo, hi = np.array([0.1, 0.05, -1.0]), np.array([10.0, 10.0, 1.0])
+    x0 = np.array([6.0, 6.0, 0.5])
+    full = least_squares(resid, x0, bounds=(lo, hi), x_scale=hi - lo, max_nfev=200,
+                         ftol=1e-12, xtol=1e-12, gtol=1e-12)
+    jac = SecantJacobian(resid, lo, hi, rel_step=1e-6, refresh=1)
+    stop = SettledStop(jac, 0.1)
+    evaluations = []
+    early = least_squares(lambda x: evaluations.append(1) or jac.residual(x), x0, jac=jac,
+                          bounds=(lo, hi), x_scale=hi - lo, max_nfev=200, callback=stop)
+    J = full.jac
+    sd = np.sqrt(np.diag(np.linalg.inv(J.T @ J)) * 2 * full.cost / (t.size - 3))
+    assert stop.stopped
+    assert np.all(np.abs(early.x - full.x) <= 0.5 * sd)
+    assert len(evaluations) < full.nfev
+    with pytest.raises(ValueError, match="tol"):
+        SettledStop(jac, 0.0)
+
+
 def test_diagnose_keeps_blas_to_one_thread_under_its_simulation_threads(monkeypatch):
     # the evaluations run their speeds on two threads; a BLAS threading its small
     # solves as well halves the throughput on two cores, whoever calls diagnose

@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
 from .features import record_features, stack_features
 from .gapmap import compare, fast_residual, feature_layout, gap_statistic, model_tol
-from .jacobian import SecantJacobian
+from .jacobian import SecantJacobian, SettledStop
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
 
@@ -248,7 +248,8 @@ def _measured_arrays(meas_feats, index):
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
-              fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None):
+              fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None,
+              settled_sigma=None):
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
@@ -279,6 +280,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     throughout. ``probe_cache`` (a dict the caller keeps across calls on one model and
     one ``meas_feats``) remembers each probe's cost: probing the same points from the
     same start again (a pair's partner, then the pair) costs nothing.
+    ``settled_sigma`` ends a converged run early once a step moved no parameter by
+    more than that share of its standard error (see
+    :class:`~sknarx.gap.jacobian.SettledStop`); None: ``max_nfev`` and scipy's
+    tolerances alone.
     """
     from scipy.stats import qmc
 
@@ -378,15 +383,21 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         cal = finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
         return [cal] if each_discrete else cal
 
-    def local(x0, nfev, combo, refresh=None):
+    def local(x0, nfev, combo, refresh=None, settled=None):
         sweep = warmed(x0, combo)
-        if refresh is None:
+        if refresh is None and settled is None:
             return least_squares(residual, x0, bounds=(lo, hi), method="trf",
                                  x_scale=hi - lo, diff_step=diff_step, max_nfev=nfev,
                                  args=(combo, sweep))
-        jac = SecantJacobian(lambda x: residual(x, combo, sweep), lo, hi, diff_step, refresh)
-        return least_squares(jac.residual, x0, jac=jac, bounds=(lo, hi), method="trf",
-                             x_scale=hi - lo, max_nfev=nfev)
+        # refresh 1: forward differences at every step, kept for the stop rule
+        jac = SecantJacobian(lambda x: residual(x, combo, sweep), lo, hi, diff_step,
+                             refresh or 1)
+        stop = SettledStop(jac, settled) if settled is not None else None
+        res = least_squares(jac.residual, x0, jac=jac, bounds=(lo, hi), method="trf",
+                            x_scale=hi - lo, max_nfev=nfev, callback=stop)
+        if stop is not None and stop.stopped:
+            res.success = True  # settled within its uncertainty: converged
+        return res
 
     if len(x0s) > 1:
         # the cheapest probe is often in the wrong basin of a periodic parameter: a short
@@ -401,7 +412,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             logger.debug("discrete settings, best short-run cost: %s",
                          ", ".join(f"{c}: {2 * r.cost:.4g}" for r, c in best))
         x0s = [(r.x, c) for r, c in best]
-    finals = [(local(x0, max_nfev, combo), combo) for x0, combo in x0s]
+    finals = [(local(x0, max_nfev, combo, settled=settled_sigma), combo)
+              for x0, combo in x0s]
     if len(finals) > 1:
         logger.debug("discrete settings, converged cost: %s",
                      ", ".join(f"{c}: {2 * r.cost:.4g}" for r, c in finals))

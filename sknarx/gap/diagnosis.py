@@ -184,6 +184,7 @@ class _SweepFrontEnd(FrontEnd):
         return calibrate(self.model, self.meas, self.train, classes,
                          **{"max_nfev": self.settings.max_nfev,
                             "jacobian_refresh": self.settings.jacobian_refresh,
+                            "settled_sigma": self.settings.settled_sigma,
                             "probe_cache": self._probe_costs, **kw})
 
     def _best(self, names, **kw):
@@ -372,7 +373,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
                                  * np.conj(s1.re.to_numpy() + 1j * s1.im.to_numpy()))))
     start = np.array([1.0, dphi, 1.0, 1.0])
     cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev,
-                     jacobian_refresh=settings.jacobian_refresh)
+                     jacobian_refresh=settings.jacobian_refresh,
+                     settled_sigma=settings.settled_sigma)
     E0, cmp0 = heldout_gap(model, meas, held, cal0, ())
     _, cmp_all = heldout_gap(model, meas, speeds, cal0, ())
     tick("nuisance calibration")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SecantJacobian", "forward_difference"]
+__all__ = ["SecantJacobian", "SettledStop", "forward_difference"]
 
 
 def forward_difference(fun, x, f0, lo, hi, rel_step):
@@ -57,6 +57,11 @@ class SecantJacobian:
         self._evaluated = 0  # residual evaluations since the last Jacobian request
         self.n_differenced = 0  # Jacobians computed by forward differences
 
+    @property
+    def jacobian(self):
+        """The Jacobian last answered (None before the first request)."""
+        return self._J
+
     def residual(self, x):
         f = np.asarray(self.fun(x), dtype=float)
         self._evaluated += 1
@@ -84,3 +89,37 @@ class SecantJacobian:
         self._evaluated = 0
         self._x, self._f = x.copy(), f
         return self._J
+
+
+class SettledStop:
+    """``least_squares`` callback: stop once a step moved no parameter by more than
+    ``tol`` of its standard error.
+
+    A calibration's converged run spends its last steps creeping along directions the
+    data hardly determine (the cost changing in the fourth digit, a parameter by a
+    small share of what its uncertainty allows), one difference Jacobian per step.
+    The standard errors are the least-squares covariance ``s^2 (J^T J)^-1`` with
+    ``s^2 = 2 cost / (m - n)`` at the new point, from ``jac`` (a
+    :class:`SecantJacobian`, asked at every accepted point before the callback);
+    a parameter the data do not determine at all has an infinite error and never
+    holds the run.
+    """
+
+    def __init__(self, jac: SecantJacobian, tol: float):
+        if not tol > 0:
+            raise ValueError(f"tol must be a positive share of a standard error, got {tol!r}.")
+        self.jac, self.tol = jac, float(tol)
+        self._x = None
+        self.stopped = False
+
+    def __call__(self, intermediate_result):
+        x = np.asarray(intermediate_result.x, dtype=float)
+        J = self.jac.jacobian
+        if self._x is not None and J is not None and J.shape[1] == x.size:
+            m, n = J.shape
+            s2 = 2.0 * float(intermediate_result.cost) / max(m - n, 1)
+            sd = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)), 0.0, None) * s2)
+            if np.all(np.abs(x - self._x) <= self.tol * sd):
+                self.stopped = True
+                raise StopIteration
+        self._x = x.copy()

@@ -15,7 +15,7 @@ __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
 #: the fields that change what a diagnosis computes (the others only read its results)
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
                  "update_nominal", "update_max_nfev", "seed", "warm_lead_s", "n_probe",
-                 "jacobian_refresh")
+                 "jacobian_refresh", "settled_sigma")
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,10 @@ class DiagnosisSettings:
     # update it by Broyden's secant rule in between (sknarx.gap.jacobian); None:
     # forward differences at every step (one simulated sweep per parameter each)
     jacobian_refresh: int | None = 4
+    # a calibration's converged run stops once a step moved no parameter by more than
+    # this share of its standard error (sknarx.gap.jacobian.SettledStop); None: it runs
+    # to max_nfev or scipy's tolerances
+    settled_sigma: float | None = 0.1
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
