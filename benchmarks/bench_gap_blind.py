@@ -164,6 +164,52 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
     }
 
 
+def member_gaps(kind, seed, family):
+    """Each member of a trial with several withheld effects: the held-out excess per
+    feature of the measurement against the same plant with that member alone taken
+    out (the others kept; no noise). A member below the noise floor is invisible beside
+    its partner -- a shallow crack beside a 50 um runout, say -- and no diagnosis can
+    name it."""
+    from plants.families import _SWEEP, MEASUREMENT, SPEEDS, draw_trial, measure
+
+    from sknarx.gap.core import alternating_split
+
+    kind = tuple(kind)
+    measured, truth, _, _ = make_family_trial(kind, seed, family)
+    speeds = np.asarray(SPEEDS)
+    held = speeds[~alternating_split(speeds.size)]
+    sweep, settle = _SWEEP[family]
+    truth = draw_trial(kind, seed, family)
+    no_noise = dict(truth, snr_db=400.0)
+    out = {}
+    for member in truth["effects"]:
+        others = {n: p for n, p in truth["effects"].items() if n != member}
+        physical = {n: p for n, p in others.items() if n not in MEASUREMENT}
+        clean = sweep(truth, physical, settle, None)
+        E, n = feature_gap(measured, measure(clean, dict(no_noise, effects=others)), held)
+        out[member] = E / max(n, 1)
+    return out
+
+
+def with_member_gaps(recs):
+    """The pair trials' records with their ``member_gap`` (:func:`member_gaps`),
+    computed once per trial and code and kept in ``gap_blind_member_gaps.json``."""
+    path = RESULTS / "gap_blind_member_gaps.json"
+    cache = json.loads(path.read_text()) if path.exists() else {}
+    out = []
+    for r in recs:
+        if isinstance(r["kind"], list) and "member_gap" not in r:
+            key = f"{r['family']}:{r['seed']}:{r['code']}"
+            if key not in cache:
+                print(f"  {r['family']} seed {r['seed']} {r['kind']}: each member's "
+                      "visibility beside the other", flush=True)
+                cache[key] = member_gaps(r["kind"], r["seed"], r["family"])
+                path.write_text(json.dumps(cache, indent=1))
+            r = {**r, "member_gap": cache[key]}
+        out.append(r)
+    return out
+
+
 def names_of(effect):
     return (effect,) if isinstance(effect, str) else tuple(effect)
 
@@ -181,9 +227,33 @@ def verdict(rec, s):
     return (names[0] if len(names) == 1 else sorted(names)), choice["shrink"]
 
 
-def truth_label(rec):
+def truth_label(rec, s=None):
+    """What a right verdict names: no-gap, the effect, or the pair (sorted); with
+    thresholds ``s``, a pair member invisible beside its partner is left out (see
+    :func:`member_gaps`): the trial is the visible member's."""
     k = rec["kind"]
-    return "no-gap" if k == "none" else (sorted(k) if isinstance(k, list) else k)
+    if k == "none":
+        return "no-gap"
+    if not isinstance(k, list):
+        return k
+    shown = visible_members(rec, s) if s is not None else k
+    return shown[0] if len(shown) == 1 else sorted(k)
+
+
+def visible_members(rec, s):
+    """The members of a pair trial that move the measurement by more than the noise
+    floor with the partner kept (all of them where that was not measured)."""
+    gaps = rec.get("member_gap")
+    if gaps is None:
+        return list(rec["kind"])
+    return [m for m in rec["kind"] if gaps[m] > s.no_gap_per_feature]
+
+
+def right(rec, s):
+    """Whether the verdict names the truth (a pair with one member invisible: that
+    member, or the pair)."""
+    got = verdict(rec, s)[0]
+    return got in (truth_label(rec, s), truth_label(rec))
 
 
 def visible(rec, s):
@@ -203,8 +273,10 @@ def top2_names(rec):
 
 def score(recs, s):
     lib = [r for r in recs if detectable(r, s)]
-    singles = [r for r in lib if isinstance(r["kind"], str)]
-    pairs = [r for r in lib if isinstance(r["kind"], list)]
+    # a pair one of whose members hides below the noise floor beside the other is
+    # scored as the visible member's single (no diagnosis can name the hidden one)
+    singles = [r for r in lib if isinstance(truth_label(r, s), str)]
+    pairs = [r for r in lib if not isinstance(truth_label(r, s), str)]
     free = [r for r in recs if r["kind"] == "none"]
     # an out-of-library effect below the noise floor cannot be told from none: like an
     # undetectable in-library effect it is counted, not scored (its verdict is no-gap)
@@ -214,15 +286,17 @@ def score(recs, s):
         return float(np.mean([ok(r) for r in rs])) if rs else float("nan")
 
     ratios = [verdict(r, s)[1] / r["oracle_shrink"] for r in lib
-              if verdict(r, s)[0] == truth_label(r) and r["oracle_shrink"] > 0]
+              if right(r, s) and r["oracle_shrink"] > 0]
     return {
-        "top1": rate(singles, lambda r: verdict(r, s)[0] == truth_label(r)),
+        "top1": rate(singles, lambda r: right(r, s)),
         "pairs_in_top2": rate(pairs, lambda r: set(r["kind"]) <= top2_names(r)),
-        "pairs_verdict": rate(pairs, lambda r: verdict(r, s)[0] == truth_label(r)),
+        "pairs_verdict": rate(pairs, lambda r: right(r, s)),
         "false_alarm": rate(free, lambda r: verdict(r, s)[0] != "no-gap"),
         "unexplained_out_of_library": rate(out, lambda r: verdict(r, s)[0] == "unexplained"),
         "shrink_vs_oracle_median": float(np.median(ratios)) if ratios else float("nan"),
         "n_detectable_singles": len(singles), "n_detectable_pairs": len(pairs),
+        "n_pairs_with_a_hidden_member": sum(1 for r in lib if isinstance(r["kind"], list)
+                                            and isinstance(truth_label(r, s), str)),
         "n_effect_free": len(free), "n_out_of_library": len(out),
         "n_undetectable": sum(1 for r in recs if r["in_library"] and r["kind"] != "none"
                               and not detectable(r, s)),
@@ -309,7 +383,7 @@ def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaus
 def confusion(recs, s):
     mat = {}
     for r in recs:
-        t, v = json.dumps(truth_label(r)), json.dumps(verdict(r, s)[0])
+        t, v = json.dumps(truth_label(r, s)), json.dumps(verdict(r, s)[0])
         mat.setdefault(t, {}).setdefault(v, 0)
         mat[t][v] += 1
     return mat
@@ -365,6 +439,7 @@ def main():
     if shard[1] > 1:
         print("shard done; run without --shard to write the report")
         return
+    evals = {fam: with_member_gaps(recs) for fam, recs in evals.items()}
     if len(null) < 3:
         print("not enough null trials logged to set the noise floor")
         return
@@ -387,14 +462,16 @@ def main():
         per_family[fam] = {"scores": sc, "confusion": confusion(recs, frozen),
                            "updates_on_effect_free": updates_on_effect_free(recs),
                            "misclassified": [
-                               {"seed": r["seed"], "truth": truth_label(r),
+                               {"seed": r["seed"], "truth": truth_label(r, frozen),
                                 "verdict": verdict(r, frozen)[0], "e0": r["e0"],
-                                "effect_gap": r["effect_gap"]}
+                                "effect_gap": r["effect_gap"],
+                                **({"member_gap": r["member_gap"]} if "member_gap" in r
+                                   else {})}
                                for r in recs
                                if (visible(r, frozen)
                                    or r["kind"] == "none")
-                               and verdict(r, frozen)[0] != (truth_label(r) if r["in_library"]
-                                                             else "unexplained")]}
+                               and not (right(r, frozen) if r["in_library"]
+                                        else verdict(r, frozen)[0] == "unexplained")]}
         rows.append([fam] + [f"{sc[k]:.2f}" for k in
                              ("top1", "pairs_in_top2", "false_alarm",
                               "unexplained_out_of_library", "shrink_vs_oracle_median")]

@@ -451,12 +451,16 @@ class BreathingCrack(Effect):
 
 @njit(nogil=True, cache=True)
 def _looseness_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+    # p: lost lateral and tilt stiffness, joint length, opening, then the DOF indices
+    # of x, y, tx, ty at O1 and at O2
     lkj, lkt, d, gap = p[0], p[1], p[2], p[3]
+    x1, y1, tx1, ty1 = int(p[4]), int(p[5]), int(p[6]), int(p[7])
+    x2, y2, tx2, ty2 = int(p[8]), int(p[9]), int(p[10]), int(p[11])
     # the joint's relative lateral displacement w_O2 - w_O1 - d/2 (slope_O1 + slope_O2)
     # in each plane (slopes: ty in x-z, -tx in y-z); the interface is a circle, so it
     # opens on the radial displacement, not per plane
-    djx = q[6] - q[2] - 0.5 * d * (q[5] + q[9])
-    djy = q[7] - q[3] + 0.5 * d * (q[4] + q[8])
+    djx = q[x2] - q[x1] - 0.5 * d * (q[ty1] + q[ty2])
+    djy = q[y2] - q[y1] + 0.5 * d * (q[tx1] + q[tx2])
     u = math.sqrt(djx * djx + djy * djy)
     if u <= gap:
         return
@@ -465,9 +469,9 @@ def _looseness_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     share = (u - gap) / u
     for plane in range(2):
         if plane == 0:
-            i1, j1, i2, j2, sg, dj = 2, 5, 6, 9, 1.0, djx
+            i1, j1, i2, j2, sg, dj = x1, ty1, x2, ty2, 1.0, djx
         else:
-            i1, j1, i2, j2, sg, dj = 3, 4, 7, 8, -1.0, djy
+            i1, j1, i2, j2, sg, dj = y1, tx1, y2, tx2, -1.0, djy
         s1, s2 = sg * q[j1], sg * q[j2]
         # the joint's restoring force is -k dj d(dj)/dq; removing the lost share adds
         # +k_lost dj d(dj)/dq, and likewise for the tilt
@@ -513,9 +517,12 @@ class JointLooseness(Effect):
         d = P.a2 - P.a1
         # the Euler-Bernoulli element through the joint is 12EI/d^3 = k on the relative
         # lateral displacement plus EI/d = k d^2/12 on the relative tilt
+        dof = context.dof_index
         return _looseness_kernel, np.array([loss * _joint_lateral_stiffness(P),
                                             loss * (P.k_theta + P.k * d * d / 12.0),
-                                            d, self.gap])
+                                            d, self.gap,
+                                            *(dof[n + at] for at in ("O1", "O2")
+                                              for n in ("x", "y", "tx", "ty"))])
 
 
 @dataclass(repr=False)
