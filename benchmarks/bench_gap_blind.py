@@ -170,7 +170,7 @@ def member_gaps(kind, seed, family):
     out (the others kept; no noise). A member below the noise floor is invisible beside
     its partner -- a shallow crack beside a 50 um runout, say -- and no diagnosis can
     name it."""
-    from plants.families import _SWEEP, MEASUREMENT, SPEEDS, draw_trial, measure
+    from plants.families import _SWEEP, MEASUREMENT, SPEEDS, measure
 
     from sknarx.gap.core import alternating_split
 
@@ -179,7 +179,6 @@ def member_gaps(kind, seed, family):
     speeds = np.asarray(SPEEDS)
     held = speeds[~alternating_split(speeds.size)]
     sweep, settle = _SWEEP[family]
-    truth = draw_trial(kind, seed, family)
     no_noise = dict(truth, snr_db=400.0)
     out = {}
     for member in truth["effects"]:

@@ -101,8 +101,8 @@ class SettledStop:
     The standard errors are the least-squares covariance ``s^2 (J^T J)^-1`` with
     ``s^2 = 2 cost / (m - n)`` at the new point, from ``jac`` (a
     :class:`SecantJacobian`, asked at every accepted point before the callback);
-    a parameter the data do not determine at all has an infinite error and never
-    holds the run.
+    a parameter the data barely determine has a large error, so its creeping does not
+    hold the run.
     """
 
     def __init__(self, jac: SecantJacobian, tol: float):

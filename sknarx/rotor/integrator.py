@@ -23,12 +23,7 @@ from numba import njit
 
 from .bearings import bearing_force
 
-__all__ = ["integrate", "no_extra_force"]
-
-
-@njit(cache=True, nogil=True)
-def no_extra_force(t, phi, omega, alpha, q, v, params, out):  # pragma: no cover
-    return
+__all__ = ["integrate"]
 
 
 @njit(nogil=True, inline="always")
