@@ -1,5 +1,6 @@
 """Nominal model updating (sknarx.gap.updating): recovery, identifiability, errors."""
 
+import dataclasses
 import math
 import re
 
@@ -105,6 +106,31 @@ def test_uninformative_data_leave_the_prior_untouched(scale, seed):
     np.testing.assert_allclose(res.table.change, 0.0, atol=1e-6)
     np.testing.assert_allclose(res.table.resolution, 0.0, atol=1e-6)
     assert res.params == base
+
+
+def test_sigma_points_carry_the_posterior_covariance():
+    # the points' second moment about the update is its posterior covariance, and each
+    # pair is symmetric about it: what the diagnosis propagates to the harmonics
+    speeds = np.linspace(40, 280, 9)
+    base = RotorParameters()
+    z, se = _noisy(linear_1x(base.replace(k1=0.9 * base.k1), speeds, DISKS), 0.01)
+    spec = DEFAULT_PARAMETERS[:9]  # stiffnesses and dampers: log scale, unbounded
+    res = update_nominal_model(z, se, speeds, DISKS, parameters=spec, model="linear")
+    points = res.sigma_points()
+    assert len(points) == len(spec)
+
+    def theta(p):
+        return np.array([math.log(getattr(p, s.name) / base.resolved(s.name)) for s in spec])
+
+    steps = [theta(p) - res.theta for pair in points for p in pair]
+    second_moment = sum(0.5 * np.outer(d, d) for d in steps)
+    np.testing.assert_allclose(second_moment, res.covariance, rtol=1e-6,
+                               atol=1e-9 * np.abs(res.covariance).max())
+    for plus, minus in points:
+        np.testing.assert_allclose(theta(plus) + theta(minus), 2 * res.theta, atol=1e-9)
+    bare = dataclasses.replace(res, theta=None)
+    with pytest.raises(ValueError, match="coordinates"):
+        bare.sigma_points()
 
 
 def test_errors_name_what_is_wrong():

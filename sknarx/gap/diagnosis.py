@@ -26,6 +26,7 @@ then frozen (see ``DiagnosisSettings``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import warnings
 from dataclasses import asdict
@@ -33,6 +34,7 @@ from dataclasses import asdict
 import numpy as np
 import pandas as pd
 
+from .._progress import progress_bar
 from ..rotor import EFFECTS, RotorParameters, SimulationDivergenceError
 from .calibration import (
     NUISANCE,
@@ -106,23 +108,66 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
                           "settle": settle_s + transient_s})
 
 
-def _with_model_tolerance(meas, nominal, update, rtol=0.01):
+def _prediction_spread(model, speeds, update, nominal, nuis):
+    """Each feature's spread (m) over the update's sigma points
+    (:meth:`~sknarx.gap.updating.UpdateResult.sigma_points`), aligned with ``nominal``
+    (the updated rotor's features): the square root of the mean squared vector
+    difference from it, summed over the principal directions.
+
+    The update is fitted to the steady 1x; what it leaves uncertain -- the bearings'
+    contact stiffness and clearance barely touch the 1x -- moves the contact's
+    harmonics, and where the journal orbit is about to unload the contact every
+    revolution it moves them by their own size (on an independent plant: the paper's
+    clearance read as radial instead of diametral turned a journal's 3x from 0.04 to
+    0.5 um). A model that cannot predict a feature cannot blame an effect for it."""
+    key = ["speed", "window", "channel", "feature"]
+    z0 = nominal.set_index(key)
+    z0 = z0["re"].to_numpy() + 1j * z0["im"].to_numpy()
+    index = pd.MultiIndex.from_frame(nominal[key])
+    var = np.zeros(len(nominal))
+    points = update.sigma_points()
+    failed = 0
+    # the sigma points, each half the weight of its direction, and the rotor before the
+    # update: what the update did to a prediction no data it saw checked is no less
+    # uncertain than the change it made
+    runs = [(p, 0.5) for pair in points for p in pair] + [(update.nominal, 1.0)]
+    for params, weight in progress_bar(runs, desc="update uncertainty", unit="sweep"):
+        try:
+            F = dataclasses.replace(model, base=params).features(speeds, nuis)
+        except SimulationDivergenceError:
+            failed += 1
+            continue
+        F = F.set_index(key).reindex(index)
+        z = F["re"].to_numpy() + 1j * F["im"].to_numpy()
+        var += weight * np.nan_to_num(np.abs(z - z0) ** 2)
+    if failed:
+        logger.warning("%d of the update's %d sigma points diverged: the model's "
+                       "prediction spread leaves them out", failed, 2 * len(points))
+    return np.sqrt(var), len(points)
+
+
+def _with_model_tolerance(meas, nominal, update, spread=None, rtol=0.01):
     """The measured features with their model-form tolerance (m), fixed once from the
     updated nominal model's own features ``S``: for the 1x, what the update could not
     remove of each channel's misfit over the training speeds (``tau_c |S|`` beyond the
     comparison's ``rtol``; a constant per-probe vector excluded); for every harmonic and
-    line, ``HARMONIC_TOL |S|``: the model's own harmonics come from a contact law no rig
-    matches. What exceeds that is what effects must explain. ``nominal``: the updated
-    nominal model's features at every speed."""
+    line, ``HARMONIC_TOL |S|`` -- the model's own harmonics come from a contact law no
+    rig matches -- and, in quadrature, ``spread``: the feature's spread over the
+    update's uncertainty (:func:`_prediction_spread`, aligned with ``nominal``). What
+    exceeds that is what effects must explain. ``nominal``: the updated nominal model's
+    features at every speed."""
     key = ["speed", "window", "channel", "feature"]
+    nominal = nominal.copy()
+    nominal["spread"] = 0.0 if spread is None else spread
     S = nominal.set_index(key).reindex(pd.MultiIndex.from_frame(meas[key]))
     size = np.hypot(S["re"].to_numpy(dtype=float), S["im"].to_numpy(dtype=float))
     tol = update.mismatch.get("model_tolerance", {}) if update is not None else {}
     extra = {c: float(np.sqrt(max(t * t - rtol * rtol, 0.0))) for c, t in tol.items()}
-    share = np.where(meas["feature"] == "1x", meas["channel"].map(extra).fillna(0.0),
-                     HARMONIC_TOL)
+    is1 = (meas["feature"] == "1x").to_numpy()
+    share = np.where(is1, meas["channel"].map(extra).fillna(0.0), HARMONIC_TOL)
+    widen = np.where(is1, 0.0, np.nan_to_num(S["spread"].to_numpy(dtype=float)))
     out = meas.copy()
-    out["model_tol"] = np.nan_to_num(share * size)
+    out["model_tol"] = np.nan_to_num(np.hypot(share * size, widen))
     return out
 
 
@@ -359,8 +404,14 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
                        lead_s=settings.warm_lead_s)
     # the updated nominal model's features, simulated once: the model-form tolerance
     # reads them at every speed, the nuisance start at the training speeds
-    nominal_all = model.features(speeds, np.array([v[3] for v in NUISANCE.values()]))
-    meas = _with_model_tolerance(meas, nominal_all, update)
+    nuis0 = np.array([v[3] for v in NUISANCE.values()])
+    nominal_all = model.features(speeds, nuis0)
+    spread, n_points = None, 0
+    if update is not None and settings.update_spread:
+        logger.info("the updated rotor's harmonics over its parameters' uncertainty")
+        spread, n_points = _prediction_spread(model, speeds, update, nominal_all, nuis0)
+        tick("update uncertainty")
+    meas = _with_model_tolerance(meas, nominal_all, update, spread)
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 
@@ -399,6 +450,14 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         "settings": asdict(settings),
         "nominal_update": _update_summary(update),
     }
+    if spread is not None:
+        harm = (nominal_all["feature"] != "1x").to_numpy()
+        doc["nominal_update"]["harmonic_spread"] = {
+            "sigma_points": 2 * n_points,
+            "median_m": float(np.median(spread[harm])),
+            "max_m": float(np.max(spread[harm])),
+            "rule": "each harmonic's and line's model-form tolerance is widened, in "
+                    "quadrature, by its spread over the update's sigma points"}
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
     if e0 <= settings.no_gap_per_feature and not exhaustive:

@@ -14,8 +14,8 @@ __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
 
 #: the fields that change what a diagnosis computes (the others only read its results)
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
-                 "update_nominal", "update_max_nfev", "seed", "warm_lead_s", "n_probe",
-                 "jacobian_refresh", "settled_sigma")
+                 "update_nominal", "update_max_nfev", "update_spread", "seed",
+                 "warm_lead_s", "n_probe", "jacobian_refresh", "settled_sigma")
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,10 @@ class DiagnosisSettings:
     # model error and is reported as such
     update_nominal: bool = True
     update_max_nfev: int = 30
+    # widen each harmonic's and line's model-form tolerance by its spread over the
+    # update's posterior (sknarx.gap.diagnosis._prediction_spread): the 1x-fitted update
+    # leaves the contact's harmonics uncertain (one simulated sweep per sigma point)
+    update_spread: bool = True
     # a calibration's local runs difference their Jacobian every this many steps and
     # update it by Broyden's secant rule in between (sknarx.gap.jacobian); None:
     # forward differences at every step (one simulated sweep per parameter each)

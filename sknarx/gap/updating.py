@@ -207,6 +207,12 @@ class UpdateResult:
         Data chi-square before and after, and the prior penalty after.
     covariance : ndarray
         Posterior covariance of ``theta`` (log or additive units).
+    theta : ndarray
+        The update's coordinates at the updated parameters (see the module docstring).
+    nominal : RotorParameters
+        The parameters the update started from (``theta = 0``).
+    parameters : tuple of UpdatingParameter
+        What was updated, in the order of ``theta``.
     """
 
     params: RotorParameters
@@ -215,6 +221,36 @@ class UpdateResult:
     mismatch: dict
     cost: dict
     covariance: np.ndarray = field(repr=False)
+    theta: np.ndarray | None = field(default=None, repr=False)
+    nominal: RotorParameters | None = field(default=None, repr=False)
+    parameters: tuple = field(default=(), repr=False)
+
+    def sigma_points(self) -> list[tuple[RotorParameters, RotorParameters]]:
+        """The updated rotor moved one posterior standard deviation either way along
+        each principal direction of the posterior covariance: pairs ``(plus, minus)``.
+
+        What the update leaves uncertain in a prediction it was not fitted to (the
+        harmonics of the bearing contact, say) is read from these: the spread of the
+        prediction over them is its second moment about the updated rotor's (an
+        unscented transform with the points on the covariance's axes). Bounded
+        parameters are clipped to their bounds.
+        """
+        if self.theta is None or self.nominal is None:
+            raise ValueError("This UpdateResult does not carry its coordinates (theta, "
+                             "nominal, parameters); it was not made by "
+                             "update_nominal_model.")
+        lower, upper = _theta_bounds(self.nominal, self.parameters)
+        lam, vec = np.linalg.eigh(self.covariance)
+        out = []
+        for value, v in zip(lam, vec.T, strict=True):
+            if value <= 0:
+                continue
+            step = math.sqrt(value) * v
+            out.append(tuple(
+                _apply(self.nominal, self.parameters,
+                       np.clip(self.theta + sign * step, lower, upper))
+                for sign in (1.0, -1.0)))
+        return out
 
     def describe(self) -> list[str]:
         """One line per significant update, e.g. ``"joint contact stiffness (kb): -18 %
@@ -462,4 +498,4 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
         cost={"chi2_before": float(r0 @ r0), "chi2_after": float(r1 @ r1),
               "prior_penalty": float(np.sum((theta / prior) ** 2)),
               "reduced_chi2_after": float(r1 @ r1) / dof},
-        covariance=cov)
+        covariance=cov, theta=np.asarray(theta, dtype=float), nominal=base, parameters=spec)
