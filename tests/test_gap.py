@@ -237,6 +237,9 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     assert "noise level: about" not in html  # the floor comes from the settings
     assert f"{doc['settings']['no_gap_per_feature']:.3g}" in html
     assert "Regenerate with" in html and doc["provenance"]["date_utc"] in html
+    spread = doc["nominal_update"]["harmonic_spread"]
+    assert spread["sigma_points"] > 0 and spread["max_m"] >= spread["median_m"] > 0
+    assert f"spread over {spread['sigma_points']} sweeps" in html
     assert (tmp_path / "out" / "gap_map.png").exists()
 
 

@@ -5,9 +5,11 @@ search, ranking, verdict and shrink are the gap core's (:mod:`sknarx.gap.core`):
 
 1. Split the speed steps into training (every other step) and held-out steps.
 2. Update the nominal rotor's linear parameters on the training steps' steady 1x
-   (:mod:`sknarx.gap.updating`), then calibrate its nuisance parameters (unbalance,
-   stiffness and damping scales); the remaining held-out gap is the gap *before*. If
-   it is within the noise floor, the verdict is ``no-gap``.
+   (:mod:`sknarx.gap.updating`); each harmonic's and line's model-form tolerance
+   carries what the update left uncertain (its spread over the update's sigma
+   points). Then calibrate the nuisance parameters (unbalance, stiffness and damping
+   scales); the remaining held-out gap is the gap *before*. If it is within the noise
+   floor, the verdict is ``no-gap``.
 3. Calibrate every candidate effect (with the nuisances) on the training steps and
    measure the held-out gap *after*; rank by the after-gap plus a penalty of two
    per effect parameter (an AIC on the chi-square scale).
@@ -109,17 +111,18 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
 
 
 def _prediction_spread(model, speeds, update, nominal, nuis):
-    """Each feature's spread (m) over the update's sigma points
-    (:meth:`~sknarx.gap.updating.UpdateResult.sigma_points`), aligned with ``nominal``
-    (the updated rotor's features): the square root of the mean squared vector
-    difference from it, summed over the principal directions.
+    """Each feature's spread (m) over what the update left uncertain, aligned with
+    ``nominal`` (the updated rotor's features), and the number of principal directions.
 
-    The update is fitted to the steady 1x; what it leaves uncertain -- the bearings'
-    contact stiffness and clearance barely touch the 1x -- moves the contact's
-    harmonics, and where the journal orbit is about to unload the contact every
-    revolution it moves them by their own size (on an independent plant: the paper's
-    clearance read as radial instead of diametral turned a journal's 3x from 0.04 to
-    0.5 um). A model that cannot predict a feature cannot blame an effect for it."""
+    The spread is the root of a second moment about the updated rotor's features: half
+    the squared vector difference at each of its sigma points
+    (:meth:`~sknarx.gap.updating.UpdateResult.sigma_points`, an unscented transform on
+    the posterior's axes), plus the whole squared difference to the rotor before the
+    update. The update is fitted to the steady 1x; the bearings' contact stiffness and
+    clearance barely touch the 1x but decide the journals' harmonics, by their own size
+    where the orbit is about to unload the contact every revolution, and what the update
+    did to a prediction no data it saw checked is no less uncertain than the change it
+    made. A model that cannot predict a feature cannot blame an effect for it."""
     key = ["speed", "window", "channel", "feature"]
     z0 = nominal.set_index(key)
     z0 = z0["re"].to_numpy() + 1j * z0["im"].to_numpy()
@@ -453,7 +456,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     if spread is not None:
         harm = (nominal_all["feature"] != "1x").to_numpy()
         doc["nominal_update"]["harmonic_spread"] = {
-            "sigma_points": 2 * n_points,
+            "sigma_points": 2 * n_points, "with_pre_update_rotor": True,
             "median_m": float(np.median(spread[harm])),
             "max_m": float(np.max(spread[harm])),
             "rule": "each harmonic's and line's model-form tolerance is widened, in "

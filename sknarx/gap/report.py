@@ -97,13 +97,19 @@ def _update_html(upd) -> str:
               "no parameter moved by more than twice its standard error")
     heads = ["parameter", "name", "nominal", "updated", "change", "resolution (0-1)",
              "significant"]
+    hs = upd.get("harmonic_spread")
+    spread = (f"<p>The harmonics' and lines' model-form tolerance carries what the "
+              f"update left uncertain: their spread over {hs['sigma_points']} sweeps at "
+              f"the update's sigma points and the rotor before the update (median "
+              f"{quantity(hs['median_m'], 'm')}, largest {quantity(hs['max_m'], 'm')}).</p>"
+              if hs else "")
     return (f"<h2>Nominal model updated (model error, not an effect)</h2>"
             f"<p>{html.escape(listed)}. Relative 1x mismatch at the training speeds "
             f"{100 * mm['before']:.2f} % before, {100 * mm['after']:.2f} % after. "
             f"{html.escape(upd['method'])}.</p>{table(rows, heads)}"
             "<p class=\"note\">Resolution: 1 - posterior/prior variance (0: the data say "
             "nothing about it). Pairs these data cannot separate (only a combination is "
-            f"determined):</p><ul>{pairs or '<li>none</li>'}</ul>")
+            f"determined):</p><ul>{pairs or '<li>none</li>'}</ul>{spread}")
 
 
 def _label(effect):
