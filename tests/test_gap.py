@@ -801,6 +801,26 @@ def test_each_discrete_setting_is_converged_and_offered_to_the_caller():
     assert one.cost == pytest.approx(min(c.cost for c in each))
 
 
+def test_probes_scale_with_the_number_of_probed_parameters():
+    """A one-parameter clearance gets 16 probes, a three-parameter crack the full 64
+    (per station), each with the start itself: the probe cache holds one cost each."""
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS
+
+    measured, _ = make_trial("clearance", 2, speeds=SPEEDS[:4], n_samples=400)
+    model, meas, train, _ = _calibration_setup(measured)
+    cal0 = calibrate(model, meas, train, (), max_nfev=2)
+    for name, expected in (("clearance", 16 + 1), ("crack", 3 * (64 + 1))):
+        cache = {}
+        calibrate(model, meas, train, [EFFECTS[name]], starts=[cal0.x], max_nfev=0,
+                  n_probe=64, probes_per_parameter=16, probe_cache=cache)
+        assert len(cache) == expected, name
+    cache = {}
+    calibrate(model, meas, train, [EFFECTS["clearance"]], starts=[cal0.x], max_nfev=0,
+              n_probe=64, probe_cache=cache)
+    assert len(cache) == 64 + 1  # without the cap: whatever the dimension
+
+
 @given(st.integers(1, 5), st.integers(0, 2**31 - 1))
 def test_the_secant_jacobian_of_an_affine_residual_is_exact_at_every_step(refresh, seed):
     """Broyden's update keeps an exact Jacobian exact on an affine residual, whatever the

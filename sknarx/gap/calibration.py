@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import logging
+import math
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -68,6 +69,8 @@ class SweepModel:
     # before its record instead of settling from rest (see ``warmed``; None: never)
     warm: dict | None = None
     lead_s: float | None = 0.3
+    # the integration step: h |lambda|max <= step_factor (see RotorBearingSimulator)
+    step_factor: float = 2.0
 
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis
@@ -100,7 +103,8 @@ class SweepModel:
         return dataclasses.replace(self, warm=dict(_pool().map(one, speeds)))
 
     def _simulator(self, nuis, effects):
-        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed)
+        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed,
+                                    step_factor=self.step_factor)
         _ = sim._setup  # build once, before the threads share it
         _ = sim._lambda_max_per_speed
         return sim
@@ -249,7 +253,7 @@ def _measured_arrays(meas_feats, index):
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
               fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None,
-              settled_sigma=None):
+              settled_sigma=None, probes_per_parameter=None):
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
@@ -283,7 +287,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     ``settled_sigma`` ends a converged run early once a step moved no parameter by
     more than that share of its standard error (see
     :class:`~sknarx.gap.jacobian.SettledStop`); None: ``max_nfev`` and scipy's
-    tolerances alone.
+    tolerances alone. ``probes_per_parameter`` caps the probes at that many per probed
+    parameter, rounded up to a power of two (a Sobol sequence's balanced sizes): a
+    clearance's one parameter needs no 64-point grid; None: ``n_probe`` whatever the
+    dimension.
     """
     from scipy.stats import qmc
 
@@ -347,7 +354,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     if classes and n_probe and j0 < len(lo):
         base = x0s[0][0]
         j = slice(j0, len(lo))
-        unit = qmc.Sobol(len(lo) - j0, scramble=True, seed=seed).random(n_probe)
+        dim = len(lo) - j0
+        if probes_per_parameter:
+            n_probe = min(n_probe, 2 ** math.ceil(math.log2(probes_per_parameter * dim)))
+        unit = qmc.Sobol(dim, scramble=True, seed=seed).random(n_probe)
         probes = []
         for combo in combos:
             points = [*(np.concatenate([base[:j0], lo[j] + u * (hi[j] - lo[j])])

@@ -107,7 +107,8 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, se
         z, np.maximum(se, 1e-12), train, channels, base=base,
         max_nfev=settings.update_max_nfev, remove_constant=True,
         nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
-                          "settle": settle_s + transient_s})
+                          "settle": settle_s + transient_s,
+                          "step_factor": settings.step_factor})
 
 
 def _prediction_spread(model, speeds, update, nominal, nuis):
@@ -233,6 +234,7 @@ class _SweepFrontEnd(FrontEnd):
                          **{"max_nfev": self.settings.max_nfev,
                             "jacobian_refresh": self.settings.jacobian_refresh,
                             "settled_sigma": self.settings.settled_sigma,
+                            "probes_per_parameter": self.settings.probes_per_parameter,
                             "probe_cache": self._probe_costs, **kw})
 
     def _best(self, names, **kw):
@@ -404,7 +406,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
                        channels=tuple(channels), transient_s=transient_s, settle_s=settle_s,
-                       lead_s=settings.warm_lead_s)
+                       lead_s=settings.warm_lead_s, step_factor=settings.step_factor)
     # the updated nominal model's features, simulated once: the model-form tolerance
     # reads them at every speed, the nuisance start at the training speeds
     nuis0 = np.array([v[3] for v in NUISANCE.values()])

@@ -77,7 +77,8 @@ def narx_view_of(result, measured, base) -> dict:
     base = result.base if result.base is not None else base
     model = SweepModel(base=base, fs=result["sampling"]["fs_hz"],
                        n_samples=result["sampling"]["samples_per_step"], channels=(ch,),
-                       settle_s=result.get("records", {}).get("simulation_settle_s", 0.0))
+                       settle_s=result.get("records", {}).get("simulation_settle_s", 0.0),
+                       step_factor=result.get("settings", {}).get("step_factor", 2.0))
     speeds = sorted(result["split"]["train_speeds"] + result["split"]["heldout_speeds"])
     nuis = np.array(list(result["nuisance"]["calibrated"].values()))
     sim = pd.concat([pd.DataFrame({"speed": w, "t": t, ch: Y[:, 0]})

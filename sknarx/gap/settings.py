@@ -15,7 +15,8 @@ __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
 #: the fields that change what a diagnosis computes (the others only read its results)
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
                  "update_nominal", "update_max_nfev", "update_spread", "seed",
-                 "warm_lead_s", "n_probe", "jacobian_refresh", "settled_sigma")
+                 "warm_lead_s", "n_probe", "jacobian_refresh", "settled_sigma",
+                 "step_factor", "probes_per_parameter")
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,9 @@ class DiagnosisSettings:
     # small corner of its range that 16 settings missed on an independent plant (shrink
     # 0.52 against 0.955 with 64; each probe is one warm-started evaluation)
     n_probe: int = 64
+    # ... at most this many per probed parameter (rounded up to a power of two): a
+    # one-parameter clearance gets 16, a two-parameter looseness 32, the rest 64
+    probes_per_parameter: int | None = 16
     transient_s: float = 0.5  # transient window of records that start with a transient
     # records found settled (see features.free_response_decay) are compared with
     # simulations settled this long first: five time constants of the paper rotor's
@@ -65,6 +69,11 @@ class DiagnosisSettings:
     # this share of its standard error (sknarx.gap.jacobian.SettledStop); None: it runs
     # to max_nfev or scipy's tolerances
     settled_sigma: float | None = 0.1
+    # the simulator's integration step for every sweep the diagnosis runs (h |lambda|max
+    # <= step_factor; RK4 is stable to ~2.8): 2.5 takes 4 steps per 1 kHz sample on the
+    # paper rotor instead of the simulator's default 5, a fifth less per evaluation,
+    # and moves the features by a small share of their standard errors (docs/gap.md)
+    step_factor: float = 2.5
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0

@@ -163,14 +163,16 @@ def linear_1x(params: RotorParameters, speeds, channels) -> np.ndarray:
 
 
 def nonlinear_1x(params: RotorParameters, speeds, channels, fs: float = 2000.0,
-                 n_samples: int = 2048, settle: float = 2.0) -> np.ndarray:
+                 n_samples: int = 2048, settle: float = 2.0,
+                 step_factor: float = 2.0) -> np.ndarray:
     """Steady 1x vectors (m, complex) of the nonlinear simulation, order-tracked.
 
     Each speed is simulated for ``settle`` seconds, then ``n_samples`` at ``fs`` are
-    fitted with a constant and orders 1-5 (least squares on the shaft angle). Same
-    shape and convention as :func:`linear_1x`.
+    fitted with a constant and orders 1-5 (least squares on the shaft angle), with the
+    simulator's integration ``step_factor``. Same shape and convention as
+    :func:`linear_1x`.
     """
-    sim = RotorBearingSimulator(params)
+    sim = RotorBearingSimulator(params, step_factor=step_factor)
     _ = sim._setup  # built once, before the threads share it
 
     def one(w):
@@ -304,7 +306,8 @@ def update_nominal_model(z, se, speeds, channels, base: RotorParameters | None =
     max_nfev : int
         Budget of forward evaluations.
     nonlinear_kwargs : dict, optional
-        Passed to :func:`nonlinear_1x` (``fs``, ``n_samples``, ``settle``).
+        Passed to :func:`nonlinear_1x` (``fs``, ``n_samples``, ``settle``,
+        ``step_factor``).
     remove_constant : bool
         Fit only what varies with speed: the weighted mean over the speeds of each
         channel's misfit is removed first. A constant 1x vector per probe (runout) is
