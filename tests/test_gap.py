@@ -801,6 +801,24 @@ def test_each_discrete_setting_is_converged_and_offered_to_the_caller():
     assert one.cost == pytest.approx(min(c.cost for c in each))
 
 
+def test_the_diagnosis_integrates_at_its_own_step_factor():
+    """Every sweep the diagnosis runs uses ``DiagnosisSettings.step_factor``: four RK-4
+    steps per 1 kHz sample on the paper rotor at 2.5, against the simulator's five."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.calibration import SweepModel
+    from sknarx.rotor import RotorParameters
+
+    nuis = np.array([1.0, 0.0, 1.0, 1.0])
+    steps = {}
+    for factor in (2.0, DiagnosisSettings().step_factor):
+        model = SweepModel(base=RotorParameters(), fs=1000.0, n_samples=100,
+                           channels=("xO1",), step_factor=factor)
+        sim = model._simulator(nuis, ())
+        assert sim.step_factor == factor
+        steps[factor] = sim.substeps(1000.0, 276.5)
+    assert steps == {2.0: 5, 2.5: 4}
+
+
 def test_probes_scale_with_the_number_of_probed_parameters():
     """A one-parameter clearance gets 16 probes, a three-parameter crack the full 64
     (per station), each with the start itself: the probe cache holds one cost each."""
