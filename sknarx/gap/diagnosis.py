@@ -124,26 +124,19 @@ def _prediction_spread(model, speeds, update, nominal, nuis):
     where the orbit is about to unload the contact every revolution, and what the update
     did to a prediction no data it saw checked is no less uncertain than the change it
     made. A model that cannot predict a feature cannot blame an effect for it."""
-    key = ["speed", "window", "channel", "feature"]
-    z0 = nominal.set_index(key)
-    z0 = z0["re"].to_numpy() + 1j * z0["im"].to_numpy()
-    index = pd.MultiIndex.from_frame(nominal[key])
-    var = np.zeros(len(nominal))
+    # same model, speeds and nuisances: the features come in ``nominal``'s order
+    z0 = nominal["re"].to_numpy() + 1j * nominal["im"].to_numpy()
+    var = np.zeros(z0.size)
     points = update.sigma_points()
     failed = 0
-    # the sigma points, each half the weight of its direction, and the rotor before the
-    # update: what the update did to a prediction no data it saw checked is no less
-    # uncertain than the change it made
     runs = [(p, 0.5) for pair in points for p in pair] + [(update.nominal, 1.0)]
     for params, weight in progress_bar(runs, desc="update uncertainty", unit="sweep"):
         try:
-            F = dataclasses.replace(model, base=params).features(speeds, nuis)
+            _, z, _, _ = dataclasses.replace(model, base=params).feature_arrays(speeds, nuis)
         except SimulationDivergenceError:
             failed += 1
             continue
-        F = F.set_index(key).reindex(index)
-        z = F["re"].to_numpy() + 1j * F["im"].to_numpy()
-        var += weight * np.nan_to_num(np.abs(z - z0) ** 2)
+        var += weight * np.nan_to_num(np.abs(np.asarray(z) - z0) ** 2)
     if failed:
         logger.warning("%d of the update's %d sigma points diverged: the model's "
                        "prediction spread leaves them out", failed, 2 * len(points))
@@ -458,11 +451,12 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     if spread is not None:
         harm = (nominal_all["feature"] != "1x").to_numpy()
         doc["nominal_update"]["harmonic_spread"] = {
-            "sigma_points": 2 * n_points, "with_pre_update_rotor": True,
+            "sigma_points": 2 * n_points,
             "median_m": float(np.median(spread[harm])),
             "max_m": float(np.max(spread[harm])),
             "rule": "each harmonic's and line's model-form tolerance is widened, in "
-                    "quadrature, by its spread over the update's sigma points"}
+                    "quadrature, by its spread over the update's sigma points and the "
+                    "rotor before the update"}
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
     if e0 <= settings.no_gap_per_feature and not exhaustive:
