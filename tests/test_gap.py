@@ -145,6 +145,24 @@ def test_a_journals_harmonics_follow_its_admitted_1x_phase_error():
         assert (compare(m, sim).z2.to_numpy()[harm].max() > 9) == is_gap, tol_1x
 
 
+@given(st.dictionaries(st.sampled_from(["xO1", "yO1", "xA", "yA", "xB", "yB", "xO2"]),
+                       st.floats(0.01, 1.0), min_size=1))
+def test_the_1x_tolerance_is_what_both_directions_of_a_probe_share(own):
+    from types import SimpleNamespace
+
+    from sknarx.gap.diagnosis import _common_1x_tolerance
+
+    # an x/y split is no isotropic parameter's doing: neither channel of a probe pair is
+    # admitted more 1x model-form error than the other's misfit, and a split's excess
+    # stays for an effect (an anisotropy) to explain
+    tol = _common_1x_tolerance(SimpleNamespace(mismatch={"model_tolerance": own}))
+    assert tol.keys() == own.keys()
+    for c, t in tol.items():
+        other = {"x": "y", "y": "x"}[c[0]] + c[1:]
+        assert t == (min(own[c], own[other]) if other in own else own[c])
+    assert _common_1x_tolerance(None) == {}
+
+
 @given(st.floats(0.01, 100.0))
 def test_inflating_a_harmonic_never_widens_its_own_tolerance(scale):
     from sknarx.gap.gapmap import HARMONIC_RTOL
@@ -837,6 +855,43 @@ def test_probes_scale_with_the_number_of_probed_parameters():
     calibrate(model, meas, train, [EFFECTS["clearance"]], starts=[cal0.x], max_nfev=0,
               n_probe=64, probe_cache=cache)
     assert len(cache) == 64 + 1  # without the cap: whatever the dimension
+
+
+def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
+    """Partners are probed on top of the lead's fit with ``pair_probes_per_parameter``
+    (a one-parameter clearance: 8 probes and the start, a two-parameter looseness: 16
+    and the start), and the pair's fit starts ``pair_short_starts`` short runs per
+    discrete setting; the pair reuses its partner's probes."""
+    from types import SimpleNamespace
+
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap import diagnosis as dg
+    from sknarx.gap.calibration import calibrate
+    from sknarx.rotor import EFFECTS
+
+    measured, _ = make_trial("clearance", 2, speeds=SPEEDS[:4], n_samples=400)
+    model, meas, train, _ = _calibration_setup(measured)
+    cal0 = calibrate(model, meas, train, (), max_nfev=2)
+    lead_cal = calibrate(model, meas, train, [EFFECTS["runout"]], starts=[cal0.x],
+                         max_nfev=0)
+    lead = SimpleNamespace(names=("runout",), state=lead_cal)
+    settings = DiagnosisSettings(pair_probes_per_parameter=8, pair_short_starts=2)
+    front = dg._SweepFrontEnd(model, meas, train, train, None, settings, cal0.x)
+    front.partners(lead, ["clearance"], 1)
+    assert len(front._probe_costs) == 8 + 1
+    front.partners(lead, ["looseness"], 1)
+    assert len(front._probe_costs) == 8 + 1 + 16 + 1
+    seen = []
+
+    def spy(*args, **kw):
+        seen.append(kw)
+        return calibrate(*args, **{**kw, "max_nfev": 0})
+
+    monkeypatch.setattr(dg, "calibrate", spy)
+    monkeypatch.setattr(dg, "heldout_gap", lambda *a: (1.0, None))
+    front.fit_pair(lead, "clearance")
+    assert len(front._probe_costs) == 8 + 1 + 16 + 1  # the partner's probes, reused
+    assert seen[0]["n_short"] == 2 and seen[0]["probes_per_parameter"] == 8
 
 
 @given(st.integers(1, 5), st.integers(0, 2**31 - 1))

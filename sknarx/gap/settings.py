@@ -16,7 +16,8 @@ __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
 SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settle_s",
                  "update_nominal", "update_max_nfev", "update_spread", "seed",
                  "warm_lead_s", "n_probe", "jacobian_refresh", "settled_sigma",
-                 "step_factor", "probes_per_parameter")
+                 "step_factor", "probes_per_parameter", "pair_probes_per_parameter",
+                 "pair_short_starts")
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,12 @@ class DiagnosisSettings:
     # ... at most this many per probed parameter (rounded up to a power of two): a
     # one-parameter clearance gets 16, a two-parameter looseness 32, the rest 64
     probes_per_parameter: int | None = 16
+    # a pair's partner is probed (and then fitted) on top of the lead's converged fit,
+    # a better informed start than a single's: half the probes per parameter and half
+    # the short local runs per discrete setting (calibrate's n_short: 4 for singles);
+    # what it saves and costs is measured in docs/gap.md (Cost)
+    pair_probes_per_parameter: int | None = 8
+    pair_short_starts: int = 2
     transient_s: float = 0.5  # transient window of records that start with a transient
     # records found settled (see features.free_response_decay) are compared with
     # simulations settled this long first: five time constants of the paper rotor's
