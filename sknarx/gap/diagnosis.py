@@ -151,8 +151,7 @@ def _common_1x_tolerance(update) -> dict:
     they cannot follow shows in both directions of a probe pair, and that common part is
     model-form error. What one direction has beyond the other -- a split the isotropic
     parameters cannot make -- is an anisotropy's signature and is left for an effect to
-    explain: taken as tolerance it hid soft pedestals on both independent plants (the
-    softened direction's misfit 12-33 % against the other's 2-15 %, docs/gap.md). A
+    explain; taken as tolerance it hides soft pedestals (measured in docs/gap.md). A
     channel without a partner keeps its own."""
     if update is None:
         return {}
