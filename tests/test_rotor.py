@@ -529,3 +529,36 @@ def test_damping_stays_symmetric_and_dissipative_wherever_the_disk_dampers_act(s
                                    frame_share_d2=s2)).C
     assert np.array_equal(C, C.T)
     assert np.linalg.eigvalsh(C).min() >= -1e-9 * max(np.abs(C).max(), 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(-6e-5, 6e-5), y=st.floats(-6e-5, 6e-5), which=st.sampled_from("AB"),
+       kB_B=st.floats(5e9, 3e10), clearance_B=st.floats(0.0, 2e-5))
+def test_the_compiled_bearing_stiffness_is_the_force_by_force_central_difference(
+        x, y, which, kB_B, clearance_B):
+    # the compiled loop replaced a Python one over bearing_force_py: the same angles,
+    # steps and order of the sums, so the same numbers, not merely close ones
+    from sknarx.rotor.bearings import bearing_force_py
+    p = R.RotorParameters(kB_B=kB_B, clearance_B=clearance_B)
+    h = 1e-3 * max(abs(x), abs(y), p.bearing(which)[1], 1e-7)
+    pitch = 2 * np.pi / p.n_balls / p.cage_ratio
+    K = np.zeros((2, 2))
+    for phi in np.linspace(0.0, pitch, 16, endpoint=False):
+        for j, (dx, dy) in enumerate(((h, 0.0), (0.0, h))):
+            K[:, j] -= (bearing_force_py(x + dx, y + dy, phi, p, which)
+                        - bearing_force_py(x - dx, y - dy, phi, p, which)) / (2 * h)
+    np.testing.assert_array_equal(bearing_stiffness(x, y, p, which=which), K / 16)
+
+
+@settings(max_examples=30, deadline=None)
+@given(omega=st.floats(0.0, 4000.0), fs=st.sampled_from([0.05, 1000.0, 20000.0]))
+def test_the_step_needs_only_the_eigenproblems_around_the_speed(omega, fs):
+    # |lambda|max is sampled lazily at the speeds around the run's: the same steps as
+    # interpolating all the samples, from at most two eigenproblems
+    sim = R.RotorBearingSimulator()
+    n = sim.substeps(fs, omega)
+    assert len(sim.__dict__["_lambda_cache"]) <= 2
+    ws = np.array(sim.LAMBDA_SPEEDS)
+    lam = np.array([sim._linear.max_oscillatory_eigenvalue(w) for w in ws])
+    full = float(np.interp(omega, ws, lam, right=lam[-1] * omega / ws[-1]))
+    assert n == max(1, int(np.ceil(full / fs / sim.step_factor)))

@@ -94,7 +94,7 @@ class SweepModel:
         """
         if self.lead_s is None or self.settle_s <= self.lead_s:
             return self
-        sim = self._simulator(nuis, effects)
+        sim = self._simulator(nuis, effects, speeds)
 
         def one(w):
             return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
@@ -102,11 +102,13 @@ class SweepModel:
 
         return dataclasses.replace(self, warm=dict(_pool().map(one, speeds)))
 
-    def _simulator(self, nuis, effects):
+    def _simulator(self, nuis, effects, speeds):
         sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed,
                                     step_factor=self.step_factor)
-        _ = sim._setup  # build once, before the threads share it
-        _ = sim._lambda_max_per_speed
+        # build once, before the threads share it: the setup and each speed's step
+        _ = sim._setup
+        for w in speeds:
+            sim.substeps(self.fs, float(w))
         return sim
 
     def records(self, speeds, nuis, effects=()):
@@ -118,7 +120,7 @@ class SweepModel:
         """``then(record)`` of each speed's simulated record, computed in the thread
         that simulated it (so one thread's post-processing overlaps the other's
         integration), in the order of ``speeds``."""
-        sim = self._simulator(nuis, effects)
+        sim = self._simulator(nuis, effects, speeds)
         warm = self.warm or {}
 
         def one(w):

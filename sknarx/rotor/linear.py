@@ -12,9 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import scipy.linalg as sla
+from numba import njit
 from scipy.optimize import brentq
 
-from .bearings import bearing_force_py
+from .bearings import bearing_force
 from .matrices import DOF_INDEX
 
 __all__ = ["LinearRotorModel", "bearing_stiffness"]
@@ -23,14 +24,34 @@ __all__ = ["LinearRotorModel", "bearing_stiffness"]
 def bearing_stiffness(x, y, params, n_avg: int = 16, rel_step: float = 1e-3, which="A"):
     """Averaged 2x2 tangent stiffness ``-dF/dq`` (N/m) of bearing ``which`` (``'A'`` or
     ``'B'``) at (x, y)."""
-    h = rel_step * max(abs(x), abs(y), params.bearing(which)[1], 1e-7)
+    kB, clearance = params.bearing(which)
+    h = rel_step * max(abs(x), abs(y), clearance, 1e-7)
     pitch = 2 * np.pi / params.n_balls / params.cage_ratio  # shaft angle of one ball pitch
+    # one compiled loop: a simulator is built at every evaluation of a calibration, and
+    # the same central differences called force by force from Python were a tenth of it
+    return _averaged_stiffness(float(x), float(y), float(h), float(pitch), int(n_avg),
+                               float(kB), float(clearance), float(params.hertz_exponent),
+                               int(params.n_balls), float(params.cage_ratio))
+
+
+@njit(cache=True, nogil=True)
+def _averaged_stiffness(x, y, h, pitch, n_avg, kB, gamma, expo, n_balls,
+                        cage_ratio):  # pragma: no cover - compiled
+    """Central differences of the force at ``n_avg`` shaft angles over one ball pitch,
+    averaged (the angles and the order of the sums as the Python loop over
+    ``np.linspace(0, pitch, n_avg, endpoint=False)`` had them: the same numbers)."""
     Kb = np.zeros((2, 2))
-    for phi in np.linspace(0.0, pitch, n_avg, endpoint=False):
-        for j, (dx, dy) in enumerate(((h, 0.0), (0.0, h))):
-            fp = bearing_force_py(x + dx, y + dy, phi, params, which)
-            fm = bearing_force_py(x - dx, y - dy, phi, params, which)
-            Kb[:, j] -= (fp - fm) / (2 * h)
+    for i in range(n_avg):
+        phi = i * (pitch / n_avg)
+        for j in range(2):
+            dx = h if j == 0 else 0.0
+            dy = h if j == 1 else 0.0
+            fpx, fpy = bearing_force(x + dx, y + dy, phi, kB, gamma, expo, n_balls,
+                                     cage_ratio)
+            fmx, fmy = bearing_force(x - dx, y - dy, phi, kB, gamma, expo, n_balls,
+                                     cage_ratio)
+            Kb[0, j] -= (fpx - fmx) / (2 * h)
+            Kb[1, j] -= (fpy - fmy) / (2 * h)
     return Kb / n_avg
 
 
@@ -52,15 +73,25 @@ class LinearRotorModel:
     K: np.ndarray
     unbalance: np.ndarray
 
-    def eigen(self, omega: float):
-        """Eigenvalues and eigenvectors of the state matrix at speed ``omega`` (rad/s)."""
+    def state_matrix(self, omega: float) -> np.ndarray:
+        """First-order state matrix at speed ``omega`` (rad/s), states ``(q, q')``."""
         n = self.M.shape[0]
         Minv = np.linalg.inv(self.M)
-        A = np.block(
+        return np.block(
             [[np.zeros((n, n)), np.eye(n)],
              [-Minv @ self.K, -Minv @ (self.C + omega * self.G)]]
         )
-        lam, vec = sla.eig(A)
+
+    def max_oscillatory_eigenvalue(self, omega: float) -> float:
+        """Largest ``|lambda|`` of the oscillatory modes (those :meth:`eigen` returns) at
+        ``omega`` (rad/s): the integration step's stability limit, without the vectors."""
+        lam = sla.eigvals(self.state_matrix(omega))
+        return float(np.max(np.abs(lam[lam.imag > 1e-9])))
+
+    def eigen(self, omega: float):
+        """Eigenvalues and eigenvectors of the state matrix at speed ``omega`` (rad/s)."""
+        n = self.M.shape[0]
+        lam, vec = sla.eig(self.state_matrix(omega))
         keep = lam.imag > 1e-9
         lam, vec = lam[keep], vec[:n, keep]
         order = np.argsort(lam.imag)

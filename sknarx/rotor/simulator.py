@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -141,7 +142,11 @@ class RotorBearingSimulator:
 
     def static_equilibrium(self) -> np.ndarray:
         """Displacements (m, rad) at rest under gravity, bearings included."""
-        return self._setup.context.q_static
+        return self._q_static
+
+    @cached_property
+    def _q_static(self):
+        return self._static()
 
     def _static(self):
         p, m = self.effective_params, self.matrices
@@ -176,9 +181,18 @@ class RotorBearingSimulator:
         return sol.x
 
     @cached_property
+    def _static_bearing_stiffness(self):
+        """Each bearing's averaged tangent stiffness (2x2, N/m) at the static
+        equilibrium: the effects' context and the linear model share it."""
+        q = self._q_static
+        return tuple(bearing_stiffness(*self._relative(q, journal, housing),
+                                       self.effective_params, which=which)
+                     for which, journal, housing in self._bearings())
+
+    @cached_property
     def _setup(self) -> _Setup:
         p, m = self.effective_params, self.matrices
-        q_static = self._static()
+        q_static = self._q_static
         ph = p.unbalance_phase
         unb = np.array([[p.m_O1 * p.e, ph, DOF_INDEX["xO1"], DOF_INDEX["yO1"]],
                         [p.m_O2 * p.resolved("e_O2"), p.beta + ph, DOF_INDEX["xO2"],
@@ -190,9 +204,8 @@ class RotorBearingSimulator:
                         DOF_INDEX["xA"], DOF_INDEX["yA"], DOF_INDEX["xB"], DOF_INDEX["yB"],
                         *p.bearing("B"), *(h for _, _, housing in bearings for h in housing)],
                        dtype=float)
-        ctx = EffectContext(q_static=q_static, params=p, bearing_stiffness=tuple(
-            bearing_stiffness(*self._relative(q_static, journal, housing), p, which=which)
-            for which, journal, housing in bearings))
+        ctx = EffectContext(q_static=q_static, params=p,
+                            bearing_stiffness=self._static_bearing_stiffness)
         kernels = [k for k in (e.force_kernel(ctx) for e in self.effects) if k is not None]
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
@@ -201,10 +214,9 @@ class RotorBearingSimulator:
     def linear_model(self) -> LinearRotorModel:
         """The rotor with its bearings linearised about the static equilibrium."""
         p, m = self.effective_params, self.matrices
-        q = self.static_equilibrium()
         K = m.K.copy()
-        for which, journal, housing in self._bearings():
-            kb = bearing_stiffness(*self._relative(q, journal, housing), p, which=which)
+        for (_, journal, housing), kb in zip(self._bearings(), self._static_bearing_stiffness,
+                                             strict=True):
             jj = list(journal)
             K[np.ix_(jj, jj)] += kb
             if housing[0] >= 0:  # the contact between journal and housing
@@ -219,18 +231,32 @@ class RotorBearingSimulator:
             unb[DOF_INDEX["y" + name]] = -1j * me * np.exp(1j * ph)
         return LinearRotorModel(M=m.M, C=m.C, G=m.G, K=K, unbalance=unb)
 
+    #: speeds (rad/s) at which ``|lambda|max`` is sampled: it grows slowly with speed
+    #: (gyroscopic stiffening) and is interpolated between them
+    LAMBDA_SPEEDS = (0.0, 250.0, 500.0, 1000.0, 2000.0)
+
+    def _lambda_max(self, i: int) -> float:
+        """``|lambda|max`` at the ``i``-th of :attr:`LAMBDA_SPEEDS`, computed when first
+        needed: a sweep below 500 rad/s needs three of the five eigenproblems, and a
+        calibration builds a simulator at every evaluation."""
+        cache = self.__dict__.setdefault("_lambda_cache", {})
+        if i not in cache:
+            cache[i] = self._linear.max_oscillatory_eigenvalue(self.LAMBDA_SPEEDS[i])
+        return cache[i]
+
     @cached_property
-    def _lambda_max_per_speed(self):
-        # |lambda|max grows slowly with speed (gyroscopic stiffening); sample it.
-        lin = self.linear_model()
-        ws = np.array([0.0, 250.0, 500.0, 1000.0, 2000.0])
-        lam = [np.max(np.abs(lin.eigen(w)[0])) for w in ws]
-        return ws, np.array(lam)
+    def _linear(self) -> LinearRotorModel:
+        return self.linear_model()
 
     def substeps(self, fs: float, omega_max: float) -> int:
         """RK4 steps per output sample for stability and accuracy (see ``step_factor``)."""
-        ws, lam = self._lambda_max_per_speed
-        lam_max = float(np.interp(omega_max, ws, lam, right=lam[-1] * omega_max / ws[-1]))
+        ws = self.LAMBDA_SPEEDS
+        if omega_max > ws[-1]:  # beyond the samples: proportional to speed
+            lam_max = self._lambda_max(len(ws) - 1) * omega_max / ws[-1]
+        else:  # linear between the two samples around it
+            i = min(max(bisect.bisect_right(ws, omega_max) - 1, 0), len(ws) - 2)
+            lam_max = float(np.interp(omega_max, ws[i:i + 2],
+                                      [self._lambda_max(i), self._lambda_max(i + 1)]))
         return max(1, math.ceil(lam_max / fs / self.step_factor))
 
     # ---------------------------------------------------------- simulation
