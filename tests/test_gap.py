@@ -831,7 +831,7 @@ def test_the_diagnosis_integrates_at_its_own_step_factor():
     for factor in (2.0, DiagnosisSettings().step_factor):
         model = SweepModel(base=RotorParameters(), fs=1000.0, n_samples=100,
                            channels=("xO1",), step_factor=factor)
-        sim = model._simulator(nuis, ())
+        sim = model._simulator(nuis, (), [276.5])
         assert sim.step_factor == factor
         steps[factor] = sim.substeps(1000.0, 276.5)
     assert steps == {2.0: 5, 2.5: 4}
