@@ -55,6 +55,12 @@ def _averaged_stiffness(x, y, h, pitch, n_avg, kB, gamma, expo, n_balls,
     return Kb / n_avg
 
 
+def _oscillatory(lam):
+    """The eigenvalues of oscillatory modes, one of each conjugate pair (positive
+    frequency): what :meth:`LinearRotorModel.eigen` returns and the step limit reads."""
+    return lam.imag > 1e-9
+
+
 @dataclass
 class LinearRotorModel:
     """``M q'' + (C + Omega G) q' + K q = F`` with the bearings linearised.
@@ -86,13 +92,13 @@ class LinearRotorModel:
         """Largest ``|lambda|`` of the oscillatory modes (those :meth:`eigen` returns) at
         ``omega`` (rad/s): the integration step's stability limit, without the vectors."""
         lam = sla.eigvals(self.state_matrix(omega))
-        return float(np.max(np.abs(lam[lam.imag > 1e-9])))
+        return float(np.max(np.abs(lam[_oscillatory(lam)])))
 
     def eigen(self, omega: float):
         """Eigenvalues and eigenvectors of the state matrix at speed ``omega`` (rad/s)."""
         n = self.M.shape[0]
         lam, vec = sla.eig(self.state_matrix(omega))
-        keep = lam.imag > 1e-9
+        keep = _oscillatory(lam)
         lam, vec = lam[keep], vec[:n, keep]
         order = np.argsort(lam.imag)
         return lam[order], vec[:, order]

@@ -146,9 +146,7 @@ class RotorBearingSimulator:
 
     @cached_property
     def _q_static(self):
-        return self._static()
-
-    def _static(self):
+        """The static equilibrium, solved once per simulator."""
         p, m = self.effective_params, self.matrices
 
         bearings = self._bearings()
