@@ -8,10 +8,10 @@ as it finishes: an interrupted run resumes where it stopped (a logged trial is r
 only while the diagnosis code and search settings are unchanged).
 
 Trials come from ``plants.families`` (the same draw for every family: an effect or
-none, a pair, or one outside the library -- line pickup, thermal bow, a 7x gear mesh
---, a per-element mismatch of stiffness, damping, contact stiffness and unbalance, SNR
-20-40 dB, keyphasor jitter), 10 settled speed steps, 6 channels ``xO1 yO1 xA yA xB yB``
-at 1 kHz. The families differ in everything but the draw:
+none, a pair, or one outside the library -- line pickup, a thermal bow relaxing over
+the sweep, a 7x gear mesh --, a per-element mismatch of stiffness, damping, contact
+stiffness and unbalance, SNR 20-40 dB, keyphasor jitter), 10 settled speed steps,
+6 channels ``xO1 yO1 xA yA xB yB`` at 1 kHz. The families differ in everything but the draw:
 
 * ``own`` -- sknarx's simulator and effect kernels (the upper bound);
 * ``second`` -- a second derivation (housings with mass, other readings of the paper,
@@ -170,7 +170,7 @@ def member_gaps(kind, seed, family):
     out (the others kept; no noise). A member below the noise floor is invisible beside
     its partner -- a shallow crack beside a 50 um runout, say -- and no diagnosis can
     name it."""
-    from plants.families import _SWEEP, MEASUREMENT, SPEEDS, measure
+    from plants.families import MEASUREMENT, SPEEDS, measure, simulate
 
     from sknarx.gap.core import alternating_split
 
@@ -178,13 +178,12 @@ def member_gaps(kind, seed, family):
     measured, truth, _, _ = make_family_trial(kind, seed, family)
     speeds = np.asarray(SPEEDS)
     held = speeds[~alternating_split(speeds.size)]
-    sweep, settle = _SWEEP[family]
     no_noise = dict(truth, snr_db=400.0)
     out = {}
     for member in truth["effects"]:
         others = {n: p for n, p in truth["effects"].items() if n != member}
         physical = {n: p for n, p in others.items() if n not in MEASUREMENT}
-        clean = sweep(truth, physical, settle, None)
+        clean = simulate(family, truth, physical)
         E, n = feature_gap(measured, measure(clean, dict(no_noise, effects=others)), held)
         out[member] = E / max(n, 1)
     return out

@@ -17,7 +17,14 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from plants.families import CHANNELS, SPEEDS, draw_trial, make_family_trial  # noqa: E402
+from plants.families import (  # noqa: E402
+    CHANNELS,
+    SPEEDS,
+    _own_sweep,
+    draw_trial,
+    make_family_trial,
+    simulate,
+)
 from plants.second_derivation import SecondDerivationPlant, SecondRotor  # noqa: E402
 
 from sknarx.orders import harmonic_basis  # noqa: E402
@@ -69,6 +76,22 @@ def test_trials_are_the_same_draw_for_every_family_but_their_own_stream():
     assert a == b
     c = draw_trial("crack", 7, "second")
     assert c["kind"] == "crack" and c["effects"]["crack"] != a["effects"]["crack"]
+
+
+def test_the_thermal_bow_relaxes_step_by_step():
+    # each step is the plant with that step's bow, settled on its own: the relaxing bow
+    # is what keeps it out of the library (a fixed one is runout plus unbalance)
+    truth = draw_trial("thermal-bow", 3, "own")
+    bow = truth["effects"]["thermal-bow"]
+    assert 2.0 <= bow["relax_steps"] <= 8.0
+    relaxing = simulate("own", truth, {"thermal-bow": bow})
+    assert list(relaxing.speed.unique()) == list(SPEEDS)
+    k = 6  # the step's bow has relaxed to exp(-6 / relax_steps) of the first step's
+    now = dict(bow, bow=bow["bow"] * np.exp(-k / bow["relax_steps"]))
+    step = _own_sweep(truth, {"thermal-bow": now}, 2.0, speeds=(SPEEDS[k],))
+    got = relaxing[relaxing.speed == SPEEDS[k]]
+    np.testing.assert_allclose(got[list(CHANNELS)].to_numpy(),
+                               step[list(CHANNELS)].to_numpy(), rtol=0, atol=1e-12)
 
 
 @pytest.mark.slow
