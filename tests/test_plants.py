@@ -94,6 +94,15 @@ def test_the_thermal_bow_relaxes_step_by_step():
                                step[list(CHANNELS)].to_numpy(), rtol=0, atol=1e-12)
 
 
+def test_the_families_read_their_speed_steps_at_call_time(monkeypatch):
+    # bench_gap_cost.py diagnoses 19-step sweeps by setting plants.families.SPEEDS
+    from plants import families
+
+    monkeypatch.setattr(families, "SPEEDS", (100.0, 150.0))
+    sweep = simulate("own", draw_trial(None, 1, "own"), {})
+    assert list(sweep.speed.unique()) == [100.0, 150.0]
+
+
 @pytest.mark.slow
 def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
     pytest.importorskip("ross")

@@ -98,7 +98,9 @@ def draw_trial(kind, seed, family):
 
 
 # ------------------------------------------------------------------ the families
-def _own_sweep(truth, physical, settle, plant=None, speeds=SPEEDS):
+# Each family's sweep: ``speeds`` None is the module's SPEEDS read at call time
+# (bench_gap_cost.py sets 19 steps there); a relaxing bow passes one step at a time.
+def _own_sweep(truth, physical, settle, plant=None, speeds=None):
     if plant:
         raise ValueError("the own family has no plant variants")
     from sknarx.rotor import EFFECTS, RotorBearingSimulator, RotorParameters
@@ -139,10 +141,11 @@ def _own_sweep(truth, physical, settle, plant=None, speeds=SPEEDS):
 
             effects.append(ThermalBow(bow=p["bow"], angle=p["angle"]))
     sim = RotorBearingSimulator(params, effects=effects)
-    return sim.sweep(list(speeds), fs=1000.0, n_samples=1000, settle=settle, progress=False)
+    return sim.sweep(list(speeds or SPEEDS), fs=1000.0, n_samples=1000, settle=settle,
+                     progress=False)
 
 
-def _second_sweep(truth, physical, settle, plant=None, speeds=SPEEDS):
+def _second_sweep(truth, physical, settle, plant=None, speeds=None):
     from plants.second_derivation import SecondDerivationPlant, SecondRotor
 
     # ``plant``: SecondRotor fields that differ from the family's plant (a variant for
@@ -183,15 +186,15 @@ def _second_sweep(truth, physical, settle, plant=None, speeds=SPEEDS):
         elif name == "gear-mesh":
             eff[name] = [p["force"], p["angle"]]
     rotor.effects = eff
-    return SecondDerivationPlant(rotor).sweep(speeds, CHANNELS, settle=settle)
+    return SecondDerivationPlant(rotor).sweep(speeds or SPEEDS, CHANNELS, settle=settle)
 
 
-def _ross_sweep(truth, physical, settle, plant=None, speeds=SPEEDS):
+def _ross_sweep(truth, physical, settle, plant=None, speeds=None):
     from plants.ross_paper_rotor import ross_sweep
 
     if plant:
         raise ValueError("the ross family has no plant variants")
-    return ross_sweep(truth, physical, speeds, CHANNELS, settle=settle)
+    return ross_sweep(truth, physical, speeds or SPEEDS, CHANNELS, settle=settle)
 
 
 _SWEEP = {"own": (_own_sweep, 2.0), "second": (_second_sweep, 1.5), "ross": (_ross_sweep, 1.0)}
