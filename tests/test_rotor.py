@@ -562,3 +562,37 @@ def test_the_step_needs_only_the_eigenproblems_around_the_speed(omega, fs):
     lam = np.array([sim._linear.max_oscillatory_eigenvalue(w) for w in ws])
     full = float(np.interp(omega, ws, lam, right=lam[-1] * omega / ws[-1]))
     assert n == max(1, int(np.ceil(full / fs / sim.step_factor)))
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(depth=st.floats(0.0, 0.6), angle=st.floats(-np.pi, np.pi),
+       mean=st.floats(0.7, 1.4), station=st.sampled_from(R.BreathingCrack.STATIONS))
+def test_a_cracks_mean_scale_is_its_element_stiffness_over_a_revolution(depth, angle, mean,
+                                                                        station):
+    # the calibration searches a crack by its mean stiffness (depth then moves only the
+    # breathing): the kernel's force averaged over the shaft angle is that of an
+    # uncracked element of stiffness mean_scale
+    from sknarx.gap.calibration import search_vector
+    from sknarx.rotor.effects import EffectContext
+
+    crack = R.BreathingCrack.from_params({"depth": depth, "angle": angle,
+                                          "mean_scale": mean, "station": station})
+    assert crack.mean_scale == pytest.approx(mean)
+    np.testing.assert_allclose(search_vector(crack), [depth, angle, np.log10(mean)],
+                               atol=1e-12)
+    ctx = EffectContext(q_static=np.zeros(12), params=R.RotorParameters())
+    q = np.random.default_rng(1).normal(size=12) * 1e-5
+
+    def force(effect, phi):
+        kernel, p = effect.force_kernel(ctx)
+        out = np.zeros(12)
+        kernel(0.0, phi, 150.0, 0.0, q, np.zeros(12), p, out)
+        return out
+
+    # the breathing force is a trigonometric polynomial of degree 3 in the angle: 16
+    # equally spaced angles average it exactly
+    phis = 2 * np.pi * np.arange(16) / 16
+    mean_force = np.mean([force(crack, f) for f in phis], axis=0)
+    uncracked = force(R.BreathingCrack(depth=0.0, element_scale=mean, station=station), 0.0)
+    np.testing.assert_allclose(mean_force, uncracked, atol=1e-9 * np.abs(uncracked).max()
+                               + 1e-15)

@@ -162,7 +162,8 @@ class Calibration:
     x: np.ndarray = None
 
     def effects(self, classes):
-        return [cls(**p) for cls, p in zip(classes, self.effect_params, strict=True)]
+        return [cls.from_params(p) for cls, p in zip(classes, self.effect_params,
+                                                     strict=True)]
 
 
 def _split_x(classes):

@@ -326,7 +326,7 @@ class _SweepFrontEnd(FrontEnd):
         for i, cls in enumerate(classes):
             if cls.linear_form is None:
                 continue
-            form = cls(**fit.state.effect_params[i]).linear_form_of()
+            form = cls.from_params(fit.state.effect_params[i]).linear_form_of()
             swapped = [*classes[:i], cls.linear_form, *classes[i + 1:]]
             start = np.concatenate([fit.state.x[:k], *blocks[:i],
                                     search_vector(form), *blocks[i + 1:]])
@@ -510,7 +510,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
 def _plain_params(classes, effect_params):
     """Each effect's fitted parameters as plain numbers (projected effects, such as the
     per-probe runout vectors, through their ``to_dict``)."""
-    return [c(**p).to_dict() if getattr(c, "projected_orders", None) else p
+    return [c.from_params(p).to_dict() if getattr(c, "projected_orders", None) else p
             for c, p in zip(classes, effect_params, strict=True)]
 
 

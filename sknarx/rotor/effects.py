@@ -153,7 +153,14 @@ class Effect:
     @classmethod
     def from_vector(cls, x):
         """The effect with its searched parameters from a calibration vector."""
-        return cls(**{n: float(v) for n, v in zip(cls.param_names(), x, strict=True)})
+        return cls.from_params({n: float(v) for n, v in zip(cls.param_names(), x,
+                                                             strict=True)})
+
+    @classmethod
+    def from_params(cls, params: dict):
+        """The effect from its searched parameters by name (``bounds``), with any of its
+        other fields (a discrete setting such as a crack's station)."""
+        return cls(**params)
 
     def to_dict(self) -> dict:
         """All fields of the effect (parameters, location) as a plain dict."""
@@ -418,10 +425,26 @@ class BreathingCrack(Effect):
     speed; a small 1x change.
 
     ``element_scale`` is the cracked element's stiffness (closed) relative to the
-    model's: a crack's mean loss of stiffness (``depth / 2``) is linear and looks to
-    the 1x like a softer element, which nominal model updating may already have taken
-    (a stiffness it is allowed to correct). With the element's stiffness fitted with
-    it, a crack is credited only with what updating cannot explain -- its breathing.
+    model's: a crack's mean loss of stiffness is linear and looks to the 1x like a
+    softer element, which nominal model updating may already have taken (a stiffness it
+    is allowed to correct). With the element's stiffness fitted with it, a crack is
+    credited only with what updating cannot explain -- its breathing. A calibration
+    searches the element's *mean* stiffness over a revolution instead (``mean_scale =
+    element_scale - depth / 4``: the open share ``h`` averages 1/2 and the crack's
+    direction turns through both planes), so that the depth moves the breathing (2x,
+    3x) and leaves the 1x to ``mean_scale``: searched as depth and closed stiffness, the
+    two trade along a narrow valley that short local runs do not follow (measured in
+    ``docs/gap.md``).
+
+    Examples
+    --------
+    >>> from sknarx.rotor import BreathingCrack
+    >>> crack = BreathingCrack(depth=0.4, station="O2-B")
+    >>> round(crack.mean_scale, 2)
+    0.9
+    >>> BreathingCrack.from_params({"depth": 0.4, "angle": 0.0, "mean_scale": 1.0,
+    ...                             "station": "O2-B"}).element_scale
+    1.1
     """
 
     depth: float = 0.1
@@ -431,17 +454,33 @@ class BreathingCrack(Effect):
     name = "crack"
     STATIONS = ("A-O1", "joint", "O2-B")
     bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin"),
-              "element_scale": (0.7, 1.4, "log")}
+              "mean_scale": (0.7, 1.4, "log")}
     #: where a calibration starts the parameters (the others: a quarter into the range)
-    start = {"element_scale": 1.0}
+    start = {"mean_scale": 1.0}
     #: settings searched over a list rather than a range (the calibration probes each)
     discrete = {"station": STATIONS}
     units = {"depth": "- (stiffness lost, open)", "angle": "rad", "station": "",
-             "element_scale": "- (element stiffness / model's)"}
+             "element_scale": "- (element stiffness, closed / model's)",
+             "mean_scale": "- (element stiffness, mean over a revolution / model's)"}
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
     def __post_init__(self):
         _check_choice(self, "station")
+
+    @property
+    def mean_scale(self) -> float:
+        """The element's stiffness averaged over a revolution, relative to the model's."""
+        return self.element_scale - 0.25 * self.depth
+
+    @classmethod
+    def from_params(cls, params: dict):
+        """The crack from its searched parameters (``mean_scale`` for the element's
+        closed stiffness) and its other fields."""
+        p = dict(params)
+        mean = p.pop("mean_scale", None)
+        if mean is not None:
+            p["element_scale"] = mean + 0.25 * p.get("depth", cls.depth)
+        return cls(**p)
 
     def force_kernel(self, context):
         k, pairs = _crack_element(self.station, context.params, context.dof_index)
