@@ -38,33 +38,25 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from _common import table, write_json  # noqa: E402
-from plants.families import CHANNELS, SPEEDS, draw_trial, simulate  # noqa: E402
-
-from sknarx.orders import order_components  # noqa: E402
-
-
-def phasors(sweep, orders=(1, 2)):
-    """Complex order components ``(speed, channel, order)`` of a clean sweep (m)."""
-    out = np.empty((len(SPEEDS), len(CHANNELS), len(orders)), complex)
-    for i, w in enumerate(SPEEDS):
-        rec = sweep[sweep.speed == w]
-        phi = w * rec["t"].to_numpy()
-        for j, ch in enumerate(CHANNELS):
-            a, p = order_components(rec[ch].to_numpy(), phi, orders)
-            out[i, j] = a * np.exp(1j * p)
-    return out
+from plants.families import (  # noqa: E402
+    CHANNELS,
+    SPEEDS,
+    draw_trial,
+    order_phasors,
+    simulate,
+)
 
 
 def references(family, seed):
     """The plant of an effect-free draw: its 1x and 2x phasors, and the 1x change that a
     20 % larger unbalance makes at each disk."""
     truth = draw_trial(None, seed, family)
-    z0 = phasors(simulate(family, truth, {}))
+    z0 = order_phasors(simulate(family, truth, {}), (1.0, 2.0))
     du = []
     for disk in ("e_O1", "e_O2"):
         t = dict(truth, mismatch=dict(truth["mismatch"]))
         t["mismatch"][disk] *= 1.2
-        du.append(phasors(simulate(family, t, {}))[..., 0] - z0[..., 0])
+        du.append(order_phasors(simulate(family, t, {}), (1.0, 2.0))[..., 0] - z0[..., 0])
     return truth, z0, du
 
 
@@ -76,7 +68,7 @@ def equivalence(family, refs, bow=1e-4, relax_steps=None):
     effect = {"thermal-bow": {"bow": bow, "angle": 0.7}}
     if relax_steps is not None:
         effect["thermal-bow"]["relax_steps"] = relax_steps
-    zb = phasors(simulate(family, truth, effect))
+    zb = order_phasors(simulate(family, truth, effect), (1.0, 2.0))
     d1, d2 = zb[..., 0] - z0[..., 0], zb[..., 1] - z0[..., 1]
     n_s, n_c = d1.shape
     runout = [np.zeros((n_s, n_c), complex) for _ in range(n_c)]

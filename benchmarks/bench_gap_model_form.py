@@ -35,7 +35,6 @@ from plants import families  # noqa: E402
 from plants.families import CHANNELS, SPEEDS, make_family_trial  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
-from sknarx.orders import order_components  # noqa: E402
 from sknarx.rotor import RotorParameters  # noqa: E402
 
 #: (label, family, plant fields changed, model clearance in m or None)
@@ -80,18 +79,8 @@ def run(label, family, plant, model_clearance, seed):
 
 
 def _orders_1x(sweep):
-    """Each step's 1x vector per channel (m, complex, ``x ~ Re(z e^{i Omega t})``),
-    speeds x channels, by the package's least-squares order fit."""
-    out = []
-    for w in SPEEDS:
-        g = sweep[sweep.speed == w]
-        phi = w * g.t.to_numpy()
-        row = []
-        for c in CHANNELS:
-            amp, ph = order_components(g[c].to_numpy(), phi, (1.0,))
-            row.append(amp[0] * np.exp(1j * ph[0]))
-        out.append(row)
-    return np.array(out)
+    """Each step's 1x vector per channel (m, complex), speeds x channels."""
+    return families.order_phasors(sweep)[..., 0]
 
 
 def nominal_differences():

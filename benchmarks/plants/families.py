@@ -275,3 +275,18 @@ def feature_gap(measured, predicted, speeds):
     p = order_features(predicted, list(CHANNELS), 0.0)
     cmp = compare(m[m.speed.isin(speeds)], p[p.speed.isin(speeds)])
     return gap_statistic(cmp), len(cmp)
+
+
+def order_phasors(sweep, orders=(1.0,)):
+    """Each step's shaft-order vectors per channel (m, complex, ``x ~ Re(z e^{i k Omega
+    t})``), shaped speeds x channels x orders, by the package's least-squares order fit."""
+    from sknarx.orders import order_components
+
+    out = np.empty((len(SPEEDS), len(CHANNELS), len(orders)), complex)
+    for i, w in enumerate(SPEEDS):
+        rec = sweep[sweep.speed == w]
+        phi = w * rec["t"].to_numpy()
+        for j, ch in enumerate(CHANNELS):
+            amp, ph = order_components(rec[ch].to_numpy(), phi, orders)
+            out[i, j] = amp * np.exp(1j * ph)
+    return out
