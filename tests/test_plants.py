@@ -78,20 +78,28 @@ def test_trials_are_the_same_draw_for_every_family_but_their_own_stream():
     assert c["kind"] == "crack" and c["effects"]["crack"] != a["effects"]["crack"]
 
 
-def test_the_thermal_bow_relaxes_step_by_step():
+def test_the_thermal_bow_relaxes_step_by_step(monkeypatch):
     # each step is the plant with that step's bow, settled on its own: the relaxing bow
-    # is what keeps it out of the library (a fixed one is runout plus unbalance)
+    # is what keeps it out of the library (a fixed one is runout plus unbalance);
+    # three of the steps, settled 0.1 s, keep the test short
+    from plants import families
+
+    monkeypatch.setattr(families, "SPEEDS", SPEEDS[:3])
+    monkeypatch.setitem(families._SWEEP, "own", (_own_sweep, 0.1))
     truth = draw_trial("thermal-bow", 3, "own")
     bow = truth["effects"]["thermal-bow"]
     assert 2.0 <= bow["relax_steps"] <= 8.0
     relaxing = simulate("own", truth, {"thermal-bow": bow})
-    assert list(relaxing.speed.unique()) == list(SPEEDS)
-    k = 6  # the step's bow has relaxed to exp(-6 / relax_steps) of the first step's
+    assert list(relaxing.speed.unique()) == list(SPEEDS[:3])
+    k = 2  # the step's bow has relaxed to exp(-2 / relax_steps) of the first step's
     now = dict(bow, bow=bow["bow"] * np.exp(-k / bow["relax_steps"]))
-    step = _own_sweep(truth, {"thermal-bow": now}, 2.0, speeds=(SPEEDS[k],))
+    step = _own_sweep(truth, {"thermal-bow": now}, 0.1, speeds=(SPEEDS[k],))
     got = relaxing[relaxing.speed == SPEEDS[k]]
     np.testing.assert_allclose(got[list(CHANNELS)].to_numpy(),
                                step[list(CHANNELS)].to_numpy(), rtol=0, atol=1e-12)
+    # a bow not relaxed (the first step's) differs there by more than the noise of a rig
+    fixed = _own_sweep(truth, {"thermal-bow": bow}, 0.1, speeds=(SPEEDS[k],))
+    assert np.abs(fixed["xO1"].to_numpy() - got["xO1"].to_numpy()).max() > 1e-6
 
 
 def test_the_families_read_their_speed_steps_at_call_time(monkeypatch):
@@ -99,6 +107,7 @@ def test_the_families_read_their_speed_steps_at_call_time(monkeypatch):
     from plants import families
 
     monkeypatch.setattr(families, "SPEEDS", (100.0, 150.0))
+    monkeypatch.setitem(families._SWEEP, "own", (_own_sweep, 0.0))  # short: steps only
     sweep = simulate("own", draw_trial(None, 1, "own"), {})
     assert list(sweep.speed.unique()) == [100.0, 150.0]
 
