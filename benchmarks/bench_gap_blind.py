@@ -169,7 +169,8 @@ def member_gaps(kind, seed, family):
     feature of the measurement against the same plant with that member alone taken
     out (the others kept; no noise). A member below the noise floor is invisible beside
     its partner -- a shallow crack beside a 50 um runout, say -- and no diagnosis can
-    name it."""
+    name it. A member whose plant run fails (ROSS's Newton iteration) gets ``None``: not
+    measured, so counted visible."""
     from plants.families import MEASUREMENT, SPEEDS, measure, simulate
 
     from sknarx.gap.core import alternating_split
@@ -183,7 +184,13 @@ def member_gaps(kind, seed, family):
     for member in truth["effects"]:
         others = {n: p for n, p in truth["effects"].items() if n != member}
         physical = {n: p for n, p in others.items() if n not in MEASUREMENT}
-        clean = simulate(family, truth, physical)
+        try:
+            clean = simulate(family, truth, physical)
+        except (FloatingPointError, RuntimeError, Warning) as exc:  # the plant diverged
+            print(f"  {family} seed {seed}: plant without {member} failed ({exc})",
+                  flush=True)
+            out[member] = None
+            continue
         E, n = feature_gap(measured, measure(clean, dict(no_noise, effects=others)), held)
         out[member] = E / max(n, 1)
     return out
@@ -244,7 +251,7 @@ def visible_members(rec, s):
     gaps = rec.get("member_gap")
     if gaps is None:
         return list(rec["kind"])
-    return [m for m in rec["kind"] if gaps[m] > s.no_gap_per_feature]
+    return [m for m in rec["kind"] if gaps[m] is None or gaps[m] > s.no_gap_per_feature]
 
 
 def right(rec, s):
