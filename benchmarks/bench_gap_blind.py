@@ -514,7 +514,9 @@ def main():
                                {"seed": r["seed"], "truth": truth_label(r, frozen),
                                 "verdict": verdict(r, frozen)[0], "e0": r["e0"],
                                 "effect_gap": r["effect_gap"],
-                                "separable": separable(r, frozen),
+                                "separable": (pair_separable(r, frozen)
+                                              if isinstance(truth_label(r, frozen), list)
+                                              else separable(r, frozen)),
                                 **({"member_gap": r["member_gap"]} if "member_gap" in r
                                    else {})}
                                for r in recs
