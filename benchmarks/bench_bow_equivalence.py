@@ -46,17 +46,20 @@ from plants.families import (  # noqa: E402
     simulate,
 )
 
+#: the shaft orders compared: the bow's 1x, and the 2x it adds through the bearings
+ORDERS = (1.0, 2.0)
+
 
 def references(family, seed):
     """The plant of an effect-free draw: its 1x and 2x phasors, and the 1x change that a
     20 % larger unbalance makes at each disk."""
     truth = draw_trial(None, seed, family)
-    z0 = order_phasors(simulate(family, truth, {}), (1.0, 2.0))
+    z0 = order_phasors(simulate(family, truth, {}), ORDERS)
     du = []
     for disk in ("e_O1", "e_O2"):
         t = dict(truth, mismatch=dict(truth["mismatch"]))
         t["mismatch"][disk] *= 1.2
-        du.append(order_phasors(simulate(family, t, {}), (1.0, 2.0))[..., 0] - z0[..., 0])
+        du.append(order_phasors(simulate(family, t, {}), ORDERS)[..., 0] - z0[..., 0])
     return truth, z0, du
 
 
@@ -68,7 +71,7 @@ def equivalence(family, refs, bow=1e-4, relax_steps=None):
     effect = {"thermal-bow": {"bow": bow, "angle": 0.7}}
     if relax_steps is not None:
         effect["thermal-bow"]["relax_steps"] = relax_steps
-    zb = order_phasors(simulate(family, truth, effect), (1.0, 2.0))
+    zb = order_phasors(simulate(family, truth, effect), ORDERS)
     d1, d2 = zb[..., 0] - z0[..., 0], zb[..., 1] - z0[..., 1]
     n_s, n_c = d1.shape
     runout = [np.zeros((n_s, n_c), complex) for _ in range(n_c)]
