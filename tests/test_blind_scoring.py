@@ -1,0 +1,65 @@
+"""The blind benchmark's scoring of logged trials (``benchmarks/bench_gap_blind.py``):
+what counts as right, where it is placed, which misses the update made. Records are
+written by hand in the logged format; nothing is simulated."""
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import bench_gap_blind as blind  # noqa: E402
+
+from sknarx.gap import DiagnosisSettings  # noqa: E402
+
+S = replace(DiagnosisSettings(), no_gap_per_feature=0.33)
+
+
+def _record(kind, truth_effects, ranking, e0=10.0, effect_gap=10.0, n=100):
+    """A logged trial: ``ranking`` as (effect, shrink, log_shrink, excess per feature,
+    params) rows, best first."""
+    rows = [{"effect": eff, "shrink": sh, "log_shrink": ls, "E": per * n,
+             "score": per * n, "params": params} for eff, sh, ls, per, params in ranking]
+    return {"kind": kind, "seed": 1, "in_library": True, "e0": e0, "n_features": n,
+            "effect_gap": effect_gap, "oracle_shrink": 0.99, "ranking": rows,
+            "truth": {"effects": truth_effects}}
+
+
+def test_a_right_name_at_the_wrong_place_scores_top1_but_not_the_place():
+    at_o2 = {"rub": {"clearance": 9e-4, "stiffness": 8e6, "friction": 0.2, "at": "O2"}}
+    wrong_disk = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O1"})])
+    right_disk = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O2"})])
+    crack = _record("crack", {"crack": {"depth": 0.3, "station": "A-O1"}},
+                    [("crack", 0.9, 0.5, 0.2, {"station": "A-O1"})])
+    for rec in (wrong_disk, right_disk, crack):
+        assert blind.right(rec, S)
+    assert not blind.placed(wrong_disk, S)
+    assert blind.placed(right_disk, S) and blind.placed(crack, S)
+    sc = blind.score([wrong_disk, right_disk, crack], S)
+    assert sc["top1"] == 1.0
+    assert sc["n_right_with_a_place"] == 3
+    assert sc["top1_right_place"] == pytest.approx(2 / 3)
+
+
+def test_effects_without_a_place_and_wrong_verdicts_are_not_placed():
+    runout = _record("runout", {"runout": {}}, [("runout", 0.99, 0.9, 0.1, {})])
+    # the crack leads but fails the log-shrink: unexplained, so neither right nor placed
+    missed = _record("rub", {"rub": {"at": "O2"}},
+                     [("crack", 0.97, 0.07, 5.3, {"station": "A-O1"}),
+                      ("rub", 0.96, 0.23, 5.8, {"at": "O2"})])
+    assert blind.verdict(missed, S)[0] == "unexplained"
+    sc = blind.score([runout, missed], S)
+    assert sc["n_right_with_a_place"] == 0
+    assert sc["top1"] == 0.5
+
+
+def test_an_effect_the_update_followed_is_not_separable():
+    # visible against the plant without it (effect gap 25) but within the floor after
+    # the update (e0 0.16): counted visible, scored, and reported as followed
+    followed = _record("anisotropy", {"anisotropy": {}}, [], e0=0.16, effect_gap=25.0)
+    assert blind.visible(followed, S)
+    assert not blind.separable(followed, S)
+    assert blind.verdict(followed, S)[0] == "no-gap"
+    sc = blind.score([followed], S)
+    assert sc["top1"] == 0.0 and sc["n_singles_followed_by_update"] == 1
