@@ -274,6 +274,12 @@ def right(rec, s):
 PLACE = {"crack": "station", "rub": "at", "misalignment": "at"}
 
 
+def has_place(rec, s):
+    """A single (or a pair scored as its visible member) whose effect has a place."""
+    name = truth_label(rec, s)
+    return isinstance(name, str) and name in PLACE
+
+
 def placed(rec, s):
     """Whether a right single verdict on an effect with a place (:data:`PLACE`) puts it
     where the truth is: the name alone scores top-1, and the joint couples the disks
@@ -346,7 +352,7 @@ def score(recs, s):
     sep_singles = [r for r in singles if separable(r, s)]
     sep_out = [r for r in out if separable(r, s)]
     sep_pairs = [r for r in pairs if separable(r, s)]
-    with_place = [r for r in singles if truth_label(r, s) in PLACE and right(r, s)]
+    with_place = [r for r in singles if has_place(r, s) and right(r, s)]
     return {
         "top1": rate(singles, lambda r: right(r, s)),
         "top1_separable": rate(sep_singles, lambda r: right(r, s)),
@@ -551,9 +557,8 @@ def main():
                                 "fitted_place": chosen(r, frozen)["params"].get(
                                     PLACE[truth_label(r, frozen)])}
                                for r in recs
-                               if detectable(r, frozen) and right(r, frozen)
-                               and truth_label(r, frozen) in PLACE
-                               and not placed(r, frozen)]}
+                               if detectable(r, frozen) and has_place(r, frozen)
+                               and right(r, frozen) and not placed(r, frozen)]}
         rows.append([fam] + [f"{sc[k]:.2f}" for k in
                              ("top1", "pairs_in_top2", "false_alarm",
                               "unexplained_out_of_library", "shrink_vs_oracle_median")]

@@ -49,7 +49,12 @@ def test_effects_without_a_place_and_wrong_verdicts_are_not_placed():
                      [("crack", 0.97, 0.07, 5.3, {"station": "A-O1"}),
                       ("rub", 0.96, 0.23, 5.8, {"at": "O2"})])
     assert blind.verdict(missed, S)[0] == "unexplained"
-    sc = blind.score([runout, missed], S)
+    # a pair is scored on its names (no place), its members' places aside
+    pair = _record(["crack", "runout"], {"crack": {"station": "O2-B"}, "runout": {}},
+                   [("runout", 0.9, 0.5, 0.6, {}),
+                    (["runout", "crack"], 0.99, 0.8, 0.1, [{}, {"station": "A-O1"}])])
+    assert blind.right(pair, S) and not blind.has_place(pair, S)
+    sc = blind.score([runout, missed, pair], S)
     assert sc["n_right_with_a_place"] == 0
     assert sc["top1"] == 0.5
 
