@@ -44,7 +44,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
 from plants.families import (  # noqa: E402
     FAMILIES,
     LIB,
@@ -62,8 +62,6 @@ from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
 TRIAL_CODE = ("gap", "rotor")
-#: how a plant run fails (ROSS's Newton iteration raises a bare Warning)
-PLANT_FAILURES = (FloatingPointError, RuntimeError, Warning)
 
 
 def git_commit():
@@ -280,14 +278,21 @@ def has_place(rec, s):
     return isinstance(name, str) and name in PLACE
 
 
+def places(rec, s):
+    """The true and the fitted place of a right single verdict on an effect with a
+    place (:func:`has_place`)."""
+    name = truth_label(rec, s)
+    key = PLACE[name]
+    return rec["truth"]["effects"][name][key], chosen(rec, s)["params"].get(key)
+
+
 def placed(rec, s):
     """Whether a right single verdict on an effect with a place (:data:`PLACE`) puts it
     where the truth is: the name alone scores top-1, and the joint couples the disks
     and the bearing ends (a rub at O2 is often fitted at O1 with as much shrink), so the
     place is reported beside it, never instead."""
-    name = truth_label(rec, s)
-    choice = chosen(rec, s)
-    return choice["params"].get(PLACE[name]) == rec["truth"]["effects"][name][PLACE[name]]
+    true, fitted = places(rec, s)
+    return fitted == true
 
 
 def visible(rec, s):
@@ -552,10 +557,8 @@ def main():
                            # named right, fitted elsewhere (see placed)
                            "misplaced": [
                                {"seed": r["seed"], "truth": truth_label(r, frozen),
-                                "true_place": r["truth"]["effects"][truth_label(r, frozen)][
-                                    PLACE[truth_label(r, frozen)]],
-                                "fitted_place": chosen(r, frozen)["params"].get(
-                                    PLACE[truth_label(r, frozen)])}
+                                **dict(zip(("true_place", "fitted_place"),
+                                           places(r, frozen), strict=True))}
                                for r in recs
                                if detectable(r, frozen) and has_place(r, frozen)
                                and right(r, frozen) and not placed(r, frozen)]}

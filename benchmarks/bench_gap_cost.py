@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, table, write_json  # noqa: E402
 from plants import families  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -90,7 +90,7 @@ def main():
                 try:
                     measured, truth, _, _ = families.make_family_trial(kind, seed, fam)
                     break
-                except (FloatingPointError, RuntimeError, Warning) as exc:
+                except PLANT_FAILURES as exc:
                     # the plant's own integration failed (ROSS's Newton iteration on a
                     # deep crack, say): no sweep at this seed, draw the next
                     print(f"{fam} {k} (seed {seed}): the plant failed ({exc})", flush=True)
