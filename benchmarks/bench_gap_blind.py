@@ -152,8 +152,10 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
         "effect_gap": e_eff / max(n_eff, 1),
         "ranking": [{"effect": r["effect"], "shrink": r["shrink"], "log_shrink": r["log_shrink"],
                      "E": r["heldout_gap_after"], "score": r["score"], "params": r["params"],
-                     **{k: r[k] for k in ("model_error", "replaces", "linear_form_tests")
-                        if r.get(k)}}
+                     **{k: r[k] for k in ("model_error", "replaces", "linear_form_tests",
+                                          "discrete_settings") if r.get(k)},
+                     **({"setting_decided": r["setting_decided"]}
+                        if "setting_decided" in r else {})}
                     for r in d["ranking"]],
         "nominal_update": {"updates": upd.get("updates", []),
                            "changes": {p["parameter"]: p["change"]
@@ -295,6 +297,13 @@ def placed(rec, s):
     return fitted == true
 
 
+def place_decided(rec, s):
+    """Whether the held-out speeds decided the place of the chosen entry
+    (``setting_decided``, see :func:`sknarx.gap.core.setting_support`); None on records
+    logged before the diagnosis said so."""
+    return chosen(rec, s).get("setting_decided")
+
+
 def visible(rec, s):
     """An effect (in the library or not) that moves the measurement by more than the
     noise floor: the same plant without it differs from the measurement by more."""
@@ -370,6 +379,10 @@ def score(recs, s):
         "n_pairs_with_a_member_followed": len(pairs) - len(sep_pairs),
         "top1_right_place": rate(with_place, lambda r: placed(r, s)),
         "n_right_with_a_place": len(with_place),
+        # the place where the data decided it (records that say so), and how many did not
+        "top1_right_place_decided": rate([r for r in with_place if place_decided(r, s)],
+                                         lambda r: placed(r, s)),
+        "n_place_undecided": sum(1 for r in with_place if place_decided(r, s) is False),
         "pairs_in_top2": rate(pairs, lambda r: set(r["kind"]) <= top2_names(r)),
         "pairs_verdict": rate(pairs, lambda r: right(r, s)),
         "false_alarm": rate(free, lambda r: verdict(r, s)[0] != "no-gap"),
@@ -558,7 +571,8 @@ def main():
                            "misplaced": [
                                {"seed": r["seed"], "truth": truth_label(r, frozen),
                                 **dict(zip(("true_place", "fitted_place"),
-                                           places(r, frozen), strict=True))}
+                                           places(r, frozen), strict=True)),
+                                "decided": place_decided(r, frozen)}
                                for r in recs
                                if detectable(r, frozen) and has_place(r, frozen)
                                and right(r, frozen) and not placed(r, frozen)]}

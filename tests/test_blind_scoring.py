@@ -68,3 +68,20 @@ def test_an_effect_the_update_followed_is_not_separable():
     assert blind.verdict(followed, S)[0] == "no-gap"
     sc = blind.score([followed], S)
     assert sc["top1"] == 0.0 and sc["n_singles_followed_by_update"] == 1
+
+
+def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
+    # the disks sit 20 mm apart across a stiff joint: a rub's disk is often not decided
+    # by the held-out speeds, and the diagnosis says so (setting_decided)
+    at_o2 = {"rub": {"at": "O2"}}
+    undecided = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O1"})])
+    undecided["ranking"][0]["setting_decided"] = False
+    decided = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O2"})])
+    decided["ranking"][0]["setting_decided"] = True
+    old = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O1"})])  # not logged
+    assert blind.place_decided(undecided, S) is False
+    assert blind.place_decided(old, S) is None
+    sc = blind.score([undecided, decided, old], S)
+    assert sc["top1_right_place"] == pytest.approx(1 / 3)
+    assert sc["top1_right_place_decided"] == 1.0
+    assert sc["n_place_undecided"] == 1

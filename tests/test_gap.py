@@ -623,6 +623,11 @@ def test_each_probe_has_its_own_runout_with_a_2x_and_it_is_found_per_probe():
     assert rows[0]["setting"]["crack"]["station"] == crack["params"]["station"]
     assert rows[0]["heldout_gap_after"] == crack["heldout_gap_after"]
     assert [r["heldout_gap_after"] for r in rows] == sorted(r["heldout_gap_after"] for r in rows)
+    # ... with how often the held-out speeds prefer the chosen station to each other one
+    assert "chosen_preferred_share" not in rows[0]
+    assert all(0.0 <= r["chosen_preferred_share"] <= 1.0 for r in rows[1:])
+    assert crack["setting_decided"] == (min(r["chosen_preferred_share"] for r in rows[1:])
+                                        >= d["settings"]["decided_setting_support"])
     for ch, vecs in truth.items():
         est = d["ranking"][0]["params"][ch]
         # a constant vector is told apart from the rotor's own 1x only as well as the
@@ -983,3 +988,98 @@ def test_diagnose_keeps_blas_to_one_thread_under_its_simulation_threads(monkeypa
     with threadpool_limits(limits=2, user_api="blas"):
         D.diagnose(None)
     assert seen and seen[0] and all(n == 1 for n in seen[0])
+
+
+# ------------------------------------------------- how firmly a discrete setting is chosen
+_speeds_excess = st.lists(st.tuples(st.floats(0, 50), st.floats(0, 50)), min_size=1,
+                          max_size=12)
+
+
+@given(_speeds_excess, st.integers(0, 2**16))
+def test_setting_support_is_antisymmetric_and_a_share(pairs, seed):
+    """The share of resamples preferring one table over another and the share preferring
+    the other add to one (the tables are paired speed by speed, ties split)."""
+    from sknarx.gap.core import setting_support
+
+    speeds = np.arange(len(pairs), dtype=float)
+    a = pd.DataFrame({"speed": speeds, "excess": [p[0] for p in pairs]})
+    b = pd.DataFrame({"speed": speeds, "excess": [p[1] for p in pairs]})
+    ab, ba = setting_support(a, b, 64, seed), setting_support(b, a, 64, seed)
+    assert 0.0 <= ab <= 1.0
+    assert ab + ba == pytest.approx(1.0)
+    # a setting that leaves more at every speed is never preferred; a diverged one always
+    worse = b.assign(excess=np.maximum(a.excess, b.excess) + 1.0)
+    assert setting_support(a, worse, 64, seed) == 1.0
+    assert setting_support(a, None, 64, seed) == 1.0
+
+
+def test_a_setting_is_decided_only_against_every_other():
+    from sknarx.gap.diagnosis import _setting_evidence
+
+    rows = [{"setting": {"crack": {"station": "A-O1"}}},
+            {"setting": {"crack": {"station": "joint"}}, "chosen_preferred_share": 0.99},
+            {"setting": {"crack": {"station": "O2-B"}}, "chosen_preferred_share": 0.7}]
+    assert _setting_evidence(rows, 0.95)["setting_decided"] is False
+    assert _setting_evidence(rows, 0.6)["setting_decided"] is True
+    assert _setting_evidence(rows[:1], 0.6)["setting_decided"] is False
+
+
+def _stub_front_end(monkeypatch, setting):
+    """The time-series front end with its fits stubbed out: only what it carries from
+    one fit to the next is exercised."""
+    from types import SimpleNamespace
+
+    from sknarx.gap import diagnosis
+    from sknarx.gap.core import CandidateFit
+
+    monkeypatch.setattr(diagnosis, "discrete_settings", lambda state, i, cls: setting)
+    monkeypatch.setattr(diagnosis, "effect_blocks", lambda x, classes: [x[:1], x[1:]])
+    fe = object.__new__(diagnosis._SweepFrontEnd)
+    fe._lead_x, fe._setting_evidence = None, {}
+    fe._calibrate = lambda names, **kw: None
+    fe._result = lambda names, cal: CandidateFit(names, {}, {}, 5, 1.0, None, {}, None)
+
+    def fit(names, details):
+        return CandidateFit(names, {}, {}, 5, 2.0, None, details,
+                            SimpleNamespace(x=np.zeros(len(diagnosis.NUISANCE) + 2)))
+    return fe, fit
+
+
+def test_a_continued_or_refitted_candidate_keeps_its_setting_evidence(monkeypatch):
+    """The lead's continuation and a pair member's refit replace the first fit in the
+    ranking: the evidence on its discrete setting (how firmly the held-out speeds chose
+    the rub's disk) must survive, and a member whose pair moved it elsewhere is not
+    decided."""
+    rows = [{"setting": {"rub": {"at": "O1"}}, "heldout_gap_after": 69.0},
+            {"setting": {"rub": {"at": "O2"}}, "heldout_gap_after": 80.0,
+             "chosen_preferred_share": 0.9}]
+    fe, fit = _stub_front_end(monkeypatch, {"at": "O1"})
+    lead = fit(("rub",), {"discrete_settings": rows, "setting_decided": False})
+    more = fe.continue_fit(lead)
+    assert more.details["discrete_settings"] is rows
+    assert more.details["setting_decided"] is False
+
+    fe._setting_evidence[("rub",)] = {"discrete_settings": rows, "setting_decided": True}
+    pair = fit(("rub", "runout"), {})
+    member = fe.refit_members(pair)[0]
+    assert member.details["setting_decided"] is True
+    fe, fit = _stub_front_end(monkeypatch, {"at": "O2"})  # the pair put the rub at O2
+    fe._setting_evidence[("rub",)] = {"discrete_settings": rows, "setting_decided": True}
+    member = fe.refit_members(fit(("rub", "runout"), {}))[0]
+    assert member.details["setting_decided"] is False
+
+
+def test_the_report_says_when_the_setting_is_not_decided():
+    from sknarx.gap.report import _discrete_text, _undecided_text
+
+    entry = {"discrete_settings": [
+        {"setting": {"rub": {"at": "O1"}}, "heldout_gap_after": 69.2},
+        {"setting": {"rub": {"at": "O2"}}, "heldout_gap_after": 79.8,
+         "chosen_preferred_share": 0.875}], "setting_decided": False}
+    text = _discrete_text(entry)
+    assert "rub O2 79.8 (the first preferred in 88 % of resamples)" in text
+    assert text.endswith("setting not decided by the data")
+    doc = {"setting_decided": False, "settings": {"decided_setting_support": 0.95}}
+    assert "fewer than 95 % of bootstrap resamples" in _undecided_text(doc)
+    assert _undecided_text({"setting_decided": True}) == ""
+    assert _undecided_text({}) == ""

@@ -15,6 +15,8 @@ both:
   chi-square scale (:func:`rank`);
 * the verdict (:func:`decide`, thresholds from the front end's
   :class:`~sknarx.gap.DiagnosisSettings`);
+* how firmly the held-out speeds chose a discrete setting (a crack's station, a rub's
+  disk) over the others (:func:`setting_support`);
 * the shrink of the held-out gap with its bootstrap band over held-out speeds
   (:func:`bootstrap_shrink`) and where the gap was and what remains of it
   (:func:`~sknarx.gap.regions`, :func:`regions_after`).
@@ -34,7 +36,8 @@ from .._progress import progress_bar
 
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
            "decide", "effect_names", "log_shrink", "preferred", "public_ranking", "rank",
-           "regions_after", "run_parallel", "search", "shrink", "table_evidence"]
+           "regions_after", "run_parallel", "search", "setting_support", "shrink",
+           "table_evidence"]
 
 logger = logging.getLogger(__name__)
 
@@ -89,6 +92,37 @@ def bootstrap_shrink(cmp_before: pd.DataFrame, cmp_after: pd.DataFrame, n: int,
         pick = rng.choice(len(vb), len(vb), replace=True)
         vals.append(shrink(vb[pick].sum(), va[pick].sum()))
     return [float(np.percentile(vals, 5)), float(np.percentile(vals, 95))]
+
+
+def setting_support(cmp_chosen: pd.DataFrame, cmp_other: pd.DataFrame | None, n: int,
+                    seed: int) -> float:
+    """Share of bootstrap resamples of the held-out speeds in which ``cmp_chosen``
+    leaves less held-out excess than ``cmp_other`` (ties count half; a diverged other,
+    None, is beaten every time).
+
+    The two tables are paired speed by speed, so what they share (the noise, the
+    model-form mismatch both carry) cancels: 0.5 is "the held-out speeds do not tell
+    them apart", 1.0 "every resample prefers the chosen one".
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> a = pd.DataFrame({"speed": [1.0, 2.0, 3.0], "excess": [0.0, 1.0, 0.0]})
+    >>> setting_support(a, a, 100, 0)
+    0.5
+    >>> setting_support(a, a.assign(excess=a.excess + 1.0), 100, 0)
+    1.0
+    """
+    if cmp_other is None:
+        return 1.0
+    a = cmp_chosen.groupby("speed")["excess"].sum()
+    b = cmp_other.groupby("speed")["excess"].sum().reindex(a.index).fillna(0.0)
+    diff = (b - a).to_numpy()  # > 0 where the chosen setting leaves less
+    if diff.size == 0:
+        return 0.5
+    rng = np.random.default_rng(seed)
+    sums = diff[rng.integers(0, diff.size, size=(n, diff.size))].sum(axis=1)
+    return float(np.mean(sums > 0) + 0.5 * np.mean(sums == 0))
 
 
 def table_evidence(cmp_before: pd.DataFrame, cmp_after: pd.DataFrame, k: int = 3) -> list:
@@ -364,7 +398,8 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -
     shrink of the held-out gap (for ``unexplained``, what the best candidate removed),
     and with a verdict its bootstrap band, the gap after and each region before and
     after; ``model_error`` where the chosen candidate carries one (the linear form of a
-    member that was no effect, see :func:`search`)."""
+    member that was no effect, see :func:`search`) and ``setting_decided`` where it has
+    discrete settings (see :func:`setting_support`)."""
     if choice == "no-gap":
         return {"verdict": "no-gap", "shrink": 0.0}
     if choice is None:
@@ -373,13 +408,17 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -
     cmp = choice["_cmp"]
     gap_after = {"heldout_excess": choice["heldout_gap_after"],
                  "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))}
-    error = {"model_error": choice["model_error"]} if choice.get("model_error") else {}
+    extra = {"model_error": choice["model_error"]} if choice.get("model_error") else {}
     if not effect_names(choice):  # model error alone explains the gap: no effect
-        return {"verdict": "no-gap", "shrink": 0.0, "gap_after": gap_after, **error}
+        return {"verdict": "no-gap", "shrink": 0.0, "gap_after": gap_after, **extra}
+    if "setting_decided" in choice:
+        # a crack's station or a rub's disk the held-out speeds did not decide is said
+        # so beside the verdict, not only in the ranking
+        extra["setting_decided"] = choice["setting_decided"]
     return {"verdict": choice["effect"], "shrink": choice["shrink"],
             "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
             "gap_after": gap_after, "regions_after": regions_after(where, cmp, cmp0),
-            **error}
+            **extra}
 
 
 def public_ranking(ranking: list) -> list[dict]:

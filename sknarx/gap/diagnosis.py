@@ -56,6 +56,7 @@ from .core import (
     public_ranking,
     run_parallel,
     search,
+    setting_support,
     table_evidence,
 )
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
@@ -204,6 +205,18 @@ def _update_summary(update) -> dict | None:
     }
 
 
+_SETTING_KEYS = ("discrete_settings", "setting_decided")
+
+
+def _setting_evidence(rows, level):
+    """A candidate's discrete-setting entries: the rows (chosen first) and whether the
+    held-out speeds prefer the chosen setting over every other in ``level`` of their
+    bootstrap resamples."""
+    shares = [r["chosen_preferred_share"] for r in rows[1:] if "chosen_preferred_share" in r]
+    return {"discrete_settings": rows,
+            "setting_decided": bool(shares) and min(shares) >= level}
+
+
 class _SweepFrontEnd(FrontEnd):
     """The time-series front end's fits: the nonlinear simulator (with the nuisance
     scalars) calibrated on the training speeds' order features."""
@@ -215,6 +228,8 @@ class _SweepFrontEnd(FrontEnd):
         # each probe's cost by effects, discrete settings and point: a pair's probes
         # are its partner's probes on top of the lead, scored once
         self._probe_costs = {}
+        # each single's discrete-setting evidence, for the refits that replace it
+        self._setting_evidence = {}
 
     def _result(self, names, cal, classes=None):
         """The candidate fit of ``cal``; with ``classes``, those it calibrated, where a
@@ -257,14 +272,21 @@ class _SweepFrontEnd(FrontEnd):
                        for cal in self._calibrate(names, each_discrete=True, **kw)),
                       key=lambda f: (f.heldout_excess, f.state.cost))
         if len(fits) > 1:
-            # what the data say about the setting: each one's held-out excess, so a
+            # what the data say about the setting: each one's held-out excess and how
+            # often a bootstrap over the held-out speeds prefers the chosen one, so a
             # setting the held-out speeds barely separate is seen as such
             classes = [EFFECTS[n] for n in names]
-            fits[0].details["discrete_settings"] = [
-                {"setting": {c.name: discrete_settings(f.state, i, c)
-                             for i, c in enumerate(classes) if c.discrete},
-                 "heldout_gap_after": f.heldout_excess, "training_cost": f.state.cost}
-                for f in fits]
+            best, st = fits[0], self.settings
+            rows = [{"setting": {c.name: discrete_settings(f.state, i, c)
+                                 for i, c in enumerate(classes) if c.discrete},
+                     "heldout_gap_after": f.heldout_excess, "training_cost": f.state.cost,
+                     **({} if f is best or best.cmp is None else
+                        {"chosen_preferred_share": setting_support(
+                            best.cmp, f.cmp, st.n_bootstrap, st.seed)})}
+                    for f in fits]
+            best.details.update(_setting_evidence(rows, st.decided_setting_support))
+            if len(names) == 1:
+                self._setting_evidence[names] = best.details
         return fits[0]
 
     def fit(self, names):
@@ -275,8 +297,11 @@ class _SweepFrontEnd(FrontEnd):
         # continuation keeps the fit's discrete settings
         self._lead_x = fit.state.x
         fixed = [discrete_settings(fit.state, i, EFFECTS[n]) for i, n in enumerate(fit.names)]
-        return self._result(fit.names, self._calibrate(fit.names, starts=[fit.state.x],
+        more = self._result(fit.names, self._calibrate(fit.names, starts=[fit.state.x],
                                                        n_probe=0, fixed=fixed))
+        # the setting was chosen by the first fit; its evidence stays with the candidate
+        more.details.update({k: fit.details[k] for k in _SETTING_KEYS if k in fit.details})
+        return more
 
     def _pair_kw(self, lead):
         # only the partner is probed; the lead keeps its discrete settings (a crack's
@@ -311,9 +336,17 @@ class _SweepFrontEnd(FrontEnd):
         for member in (0, 1):
             name = pair.names[member]
             start = np.concatenate([x[:k], blocks[member]])
-            cal = self._calibrate((name,), starts=[start], n_probe=0,
-                                  fixed=[discrete_settings(pair.state, member, EFFECTS[name])])
-            out.append(self._result((name,), cal))
+            setting = discrete_settings(pair.state, member, EFFECTS[name])
+            cal = self._calibrate((name,), starts=[start], n_probe=0, fixed=[setting])
+            refit = self._result((name,), cal)
+            # the member's setting came from the pair: its single's evidence holds
+            # only where the single chose the same one
+            single = self._setting_evidence.get((name,))
+            if single is not None:
+                same = single["discrete_settings"][0]["setting"].get(name) == setting
+                refit.details.update({"discrete_settings": single["discrete_settings"],
+                                      "setting_decided": same and single["setting_decided"]})
+            out.append(refit)
         return out
 
     def linear_forms(self, fit):

@@ -143,8 +143,28 @@ def _discrete_text(entry) -> str:
         return ", ".join(f"{name} {v}" for name, fields in setting.items()
                          for v in fields.values())
 
+    def share(r):
+        v = r.get("chosen_preferred_share")
+        return "" if v is None else f" (the first preferred in {100 * v:.0f} % of resamples)"
+
+    decided = entry.get("setting_decided")
     return ("held-out excess by setting: "
-            + "; ".join(f"{label(r['setting'])} {_excess(r['heldout_gap_after'])}" for r in rows))
+            + "; ".join(f"{label(r['setting'])} {_excess(r['heldout_gap_after'])}{share(r)}"
+                        for r in rows)
+            + ("" if decided is None else
+               "; setting decided" if decided else "; setting not decided by the data"))
+
+
+def _undecided_text(doc) -> str:
+    """The verdict's caveat where the held-out speeds did not decide its discrete
+    setting (a crack's station, a rub's disk)."""
+    if doc.get("setting_decided", True):
+        return ""
+    level = (doc.get("settings") or {}).get("decided_setting_support")
+    share = f"{100 * level:.0f} % of" if level is not None else "enough"
+    return (" Where it acts is not decided by these data: another setting fits the "
+            f"held-out speeds nearly as well (the chosen one is preferred in fewer than "
+            f"{share} bootstrap resamples of them; see the ranking's evidence).")
 
 
 def _linear_form_text(entry) -> str:
@@ -224,7 +244,8 @@ def _html(doc, figs, prov):
                     f"held-out gap{band_txt}; the gap was {before:.3g} per feature against "
                     f"the no-gap floor {floor:.3g}."
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
-                       f"not an effect): {error}." if error else ""))
+                       f"not an effect): {error}." if error else "")
+                    + _undecided_text(doc))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
