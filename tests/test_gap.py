@@ -1083,3 +1083,39 @@ def test_the_report_says_when_the_setting_is_not_decided():
     assert "fewer than 95 % of bootstrap resamples" in _undecided_text(doc)
     assert _undecided_text({"setting_decided": True}) == ""
     assert _undecided_text({}) == ""
+
+
+def test_the_verdicts_other_settings_are_refitted_from_its_own_fit(monkeypatch):
+    """A setting whose own search missed the basin the chosen one found is no evidence
+    against it: refitted from the verdict's fit it reaches nearly the same held-out
+    excess, and the setting is then not decided."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import CandidateFit
+
+    fe, fit = _stub_front_end(monkeypatch, {"at": "O1"})
+    fe.settings = DiagnosisSettings()
+    cmp = pd.DataFrame({"speed": [1.0, 2.0, 3.0], "excess": [1.0, 1.0, 1.0]})
+    rows = [{"setting": {"rub": {"at": "O1"}}, "heldout_gap_after": 3.0,
+             "training_cost": 10.0},
+            {"setting": {"rub": {"at": "O2"}}, "heldout_gap_after": 50.0,
+             "training_cost": 40.0, "chosen_preferred_share": 1.0}]
+    verdict = fit(("rub",), {"discrete_settings": rows, "setting_decided": True})
+    verdict.cmp, verdict.heldout_excess = cmp, 3.0
+    verdict.state.cost = 10.0
+    seen = []
+
+    def calibrate(names, **kw):
+        seen.append(kw)
+        return None
+    fe._calibrate = calibrate
+    fe._result = lambda names, cal: CandidateFit(
+        names, {}, {}, 5, 3.1, cmp.assign(excess=[1.0, 1.1, 1.0]), {},
+        type("State", (), {"cost": 10.5})())
+    entries = fe.recheck_setting(verdict)
+    # one refit: the other disk, held, started from the verdict's parameters
+    assert len(seen) == 1 and seen[0]["fixed"] == [{"at": "O2"}]
+    assert seen[0]["starts"][0] is verdict.state.x and seen[0]["n_probe"] == 0
+    other = entries["discrete_settings"][1]
+    assert other["from_chosen_fit"] and other["heldout_gap_after"] == 3.1
+    assert other["chosen_preferred_share"] < 0.95
+    assert entries["setting_decided"] is False

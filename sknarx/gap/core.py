@@ -36,7 +36,7 @@ from .._progress import progress_bar
 
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
            "decide", "effect_names", "log_shrink", "preferred", "public_ranking", "rank",
-           "regions_after", "run_parallel", "search", "setting_support", "shrink",
+           "recheck_choice", "regions_after", "run_parallel", "search", "setting_support", "shrink",
            "table_evidence"]
 
 logger = logging.getLogger(__name__)
@@ -271,6 +271,12 @@ class FrontEnd:
         """Each member of the best pair alone, started from the pair's fit."""
         return []
 
+    def recheck_setting(self, fit: CandidateFit) -> dict | None:
+        """The verdict's discrete-setting entries (``discrete_settings``,
+        ``setting_decided``) after each other setting was refitted from the verdict's own
+        fit (None: nothing to recheck)."""
+        return None
+
     def linear_forms(self, fit: CandidateFit) -> list:
         """The candidate refitted with each member that has a linear form
         (:attr:`sknarx.rotor.Effect.linear_form`) in that form: named by its other
@@ -391,6 +397,20 @@ def _without_linear_members(front, fits, E0, cmp0, tick):
         # the tested candidate's entry (or its replacement) carries what the test found
         ranked = rank(fits, E0, cmp0)
     return ranked
+
+
+def recheck_choice(front: FrontEnd, choice) -> None:
+    """Where the verdict has a discrete setting (a crack's station, a rub's disk), each
+    other setting refitted from the verdict's own fit (``front.recheck_setting``): a
+    setting whose own search missed the basin the chosen one found is no evidence
+    against it. Only the verdict's entry is rechecked (what it costs is one converged
+    run per other setting); its entries are updated in place."""
+    if not isinstance(choice, dict) or "_fit" not in choice:
+        return
+    entries = front.recheck_setting(choice["_fit"])
+    if entries:
+        choice.update(entries)
+        choice["_fit"].details.update(entries)
 
 
 def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:
