@@ -351,10 +351,10 @@ class _SweepFrontEnd(FrontEnd):
         return out
 
     def recheck_setting(self, fit):
-        # each other setting's own search started from rest or from probes; from the
-        # chosen fit it may reach what the chosen one reached (a rub at the other disk,
-        # 20 mm away across the stiff joint: ROSS rub 21015, O2's own fit training cost
-        # 1237 against O1's 336, from O1's fit 344 -- and held-out 898 against 894)
+        # each other setting's own search started from its probes and may have missed
+        # the basin the chosen one found; started from the chosen fit it may reach it
+        # (a rub at one of two disks that a stiff joint couples: measured in docs/gap.md,
+        # "Where the verdict acts")
         rows = fit.details.get("discrete_settings")
         if not rows:
             return None

@@ -84,8 +84,7 @@ class DiagnosisSettings:
     # a discrete setting (a crack's station, a rub's disk, a misalignment's end) is
     # reported as decided where the held-out speeds prefer it over every other setting
     # in this share of bootstrap resamples (sknarx.gap.core.setting_support): stated,
-    # like the shrink's 5-95 % band, not fitted. Measured: with probes at one disk and
-    # the journals, a rub's disk is often not decided, even on the package's own rotor
+    # like the shrink's 5-95 % band, not fitted
     decided_setting_support: float = 0.95
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
