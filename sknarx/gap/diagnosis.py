@@ -571,9 +571,11 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         warnings.simplefilter("ignore")
         ranked = search(front, candidates, E0, cmp0, n_features, settings, tick)
     choice = decide(e0, ranked, settings, n_features)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        recheck_choice(front, choice)
+    if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            recheck_choice(front, choice)
+        tick("verdict's other settings refitted from its fit")
     doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
     if isinstance(choice, dict):
         result.tables["after"] = choice["_cmp"]
