@@ -1035,7 +1035,7 @@ def _stub_front_end(monkeypatch, setting):
     monkeypatch.setattr(diagnosis, "discrete_settings", lambda state, i, cls: setting)
     monkeypatch.setattr(diagnosis, "effect_blocks", lambda x, classes: [x[:1], x[1:]])
     fe = object.__new__(diagnosis._SweepFrontEnd)
-    fe._lead_x, fe._setting_evidence = None, {}
+    fe._lead_x, fe._setting_evidence, fe._setting_fits = None, {}, {}
     fe._calibrate = lambda names, **kw: None
     fe._result = lambda names, cal: CandidateFit(names, {}, {}, 5, 1.0, None, {}, None)
 
@@ -1111,11 +1111,51 @@ def test_the_verdicts_other_settings_are_refitted_from_its_own_fit(monkeypatch):
     fe._result = lambda names, cal: CandidateFit(
         names, {}, {}, 5, 3.1, cmp.assign(excess=[1.0, 1.1, 1.0]), {},
         type("State", (), {"cost": 10.5})())
-    entries = fe.recheck_setting(verdict)
+    entries, better = fe.recheck_setting(verdict)
     # one refit: the other disk, held, started from the verdict's parameters
     assert len(seen) == 1 and seen[0]["fixed"] == [{"at": "O2"}]
     assert seen[0]["starts"][0] is verdict.state.x and seen[0]["n_probe"] == 0
+    assert better is None  # the verdict's disk still fits best
     other = entries["discrete_settings"][1]
     assert other["from_chosen_fit"] and other["heldout_gap_after"] == 3.1
     assert other["chosen_preferred_share"] < 0.95
     assert entries["setting_decided"] is False
+
+    # refitted from the verdict's fit, the other end does better: it replaces the fit
+    fe._result = lambda names, cal: CandidateFit(
+        names, {"at": "B"}, {}, 5, 1.0, cmp.assign(excess=[0.2, 0.4, 0.4]), {},
+        type("State", (), {"cost": 8.0})())
+    entries, better = fe.recheck_setting(verdict)
+    assert better is not None and better.heldout_excess == 1.0
+    rows = entries["discrete_settings"]
+    assert rows[0]["from_chosen_fit"] and rows[0]["heldout_gap_after"] == 1.0
+    assert rows[1]["setting"] == {"rub": {"at": "O1"}}
+    assert rows[1]["chosen_preferred_share"] == 1.0 and entries["setting_decided"]
+
+
+def test_a_better_setting_found_by_the_recheck_is_decided_again():
+    """The core side of the recheck: the better fit replaces the verdict's in the
+    ranking and the verdict is decided from the new ranking."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import CandidateFit, FrontEnd, rank, recheck_choice
+
+    cmp0 = pd.DataFrame({"speed": [1.0, 2.0], "window": "steady", "channel": "xO1",
+                         "feature": "1x", "excess": [50.0, 50.0], "z2": 52.0, "gap": 1e-6})
+    first = CandidateFit(("misalignment",), {"at": "A"}, {}, 5, 40.0,
+                         cmp0.assign(excess=[20.0, 20.0]),
+                         {"discrete_settings": [{"setting": {}}]})
+    other = CandidateFit(("crack",), {"station": "A-O1"}, {}, 3, 60.0,
+                         cmp0.assign(excess=[30.0, 30.0]), {})
+    better = CandidateFit(("misalignment",), {"at": "B"}, {}, 5, 10.0,
+                          cmp0.assign(excess=[5.0, 5.0]), {})
+
+    class Front(FrontEnd):
+        def recheck_setting(self, fit):
+            return {"discrete_settings": [], "setting_decided": True}, better
+
+    ranked = rank([first, other], 100.0, cmp0)
+    s = DiagnosisSettings()
+    choice, ranked = recheck_choice(Front(), ranked[0], ranked, 100.0, cmp0, s, 2, 50.0)
+    assert choice["_fit"] is better and choice["params"] == {"at": "B"}
+    assert choice["setting_decided"] is True
+    assert [r["params"] for r in ranked] == [{"at": "B"}, {"station": "A-O1"}]

@@ -271,10 +271,11 @@ class FrontEnd:
         """Each member of the best pair alone, started from the pair's fit."""
         return []
 
-    def recheck_setting(self, fit: CandidateFit) -> dict | None:
-        """The verdict's discrete-setting entries (``discrete_settings``,
-        ``setting_decided``) after each other setting was refitted from the verdict's own
-        fit (None: nothing to recheck)."""
+    def recheck_setting(self, fit: CandidateFit) -> tuple | None:
+        """After each other discrete setting of the verdict was refitted from its own
+        fit: the verdict's setting entries (``discrete_settings``, ``setting_decided``)
+        and the fit of a setting that did better than the verdict's (else None). None:
+        nothing to recheck."""
         return None
 
     def linear_forms(self, fit: CandidateFit) -> list:
@@ -399,18 +400,29 @@ def _without_linear_members(front, fits, E0, cmp0, tick):
     return ranked
 
 
-def recheck_choice(front: FrontEnd, choice) -> None:
+def recheck_choice(front: FrontEnd, choice, ranked: list, E0: float, cmp0: pd.DataFrame,
+                   settings, n_features: int, e0: float):
     """Where the verdict has a discrete setting (a crack's station, a rub's disk), each
     other setting refitted from the verdict's own fit (``front.recheck_setting``): a
     setting whose own search missed the basin the chosen one found is no evidence
-    against it. Only the verdict's entry is rechecked (what it costs is one converged
-    run per other setting); its entries are updated in place."""
+    against it, and one that now fits the held-out speeds better replaces the verdict's
+    fit in the ranking, which is then decided again (once). Only the verdict is
+    rechecked (one converged run per other setting). Returns the choice and ranking to
+    conclude from."""
     if not isinstance(choice, dict) or "_fit" not in choice:
-        return
-    entries = front.recheck_setting(choice["_fit"])
-    if entries:
+        return choice, ranked
+    out = front.recheck_setting(choice["_fit"])
+    if not out:
+        return choice, ranked
+    entries, better = out
+    if better is None:
         choice.update(entries)
         choice["_fit"].details.update(entries)
+        return choice, ranked
+    better.details.update(entries)
+    fits = [better if r is choice else r["_fit"] for r in ranked]
+    ranked = rank(fits, E0, cmp0)
+    return decide(e0, ranked, settings, n_features), ranked
 
 
 def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:

@@ -209,6 +209,11 @@ def _update_summary(update) -> dict | None:
 _SETTING_KEYS = ("discrete_settings", "setting_decided")
 
 
+def _setting_key(setting) -> tuple:
+    """A discrete-setting row's ``setting`` ({effect: {name: value}}) as a dict key."""
+    return tuple((n, tuple(sorted(d.items()))) for n, d in sorted(setting.items()))
+
+
 def _setting_evidence(rows, level):
     """A candidate's discrete-setting entries: the rows (chosen first) and whether the
     held-out speeds prefer the chosen setting over every other in ``level`` of their
@@ -229,8 +234,10 @@ class _SweepFrontEnd(FrontEnd):
         # each probe's cost by effects, discrete settings and point: a pair's probes
         # are its partner's probes on top of the lead, scored once
         self._probe_costs = {}
-        # each single's discrete-setting evidence, for the refits that replace it
+        # each single's discrete-setting evidence, for the refits that replace it, and
+        # each candidate's fit per setting, for the verdict's recheck
         self._setting_evidence = {}
+        self._setting_fits = {}
 
     def _result(self, names, cal, classes=None):
         """The candidate fit of ``cal``; with ``classes``, those it calibrated, where a
@@ -286,6 +293,8 @@ class _SweepFrontEnd(FrontEnd):
                             best.cmp, f.cmp, st.n_bootstrap, st.seed)})}
                     for f in fits]
             best.details.update(_setting_evidence(rows, st.decided_setting_support))
+            self._setting_fits[names] = {_setting_key(r["setting"]): f
+                                         for r, f in zip(rows, fits, strict=True)}
             if len(names) == 1:
                 self._setting_evidence[names] = best.details
         return fits[0]
@@ -353,40 +362,51 @@ class _SweepFrontEnd(FrontEnd):
     def recheck_setting(self, fit):
         # each other setting's own search started from its probes and may have missed
         # the basin the chosen one found; started from the chosen fit it may reach it
-        # (a rub at one of two disks that a stiff joint couples: measured in docs/gap.md,
-        # "Where the verdict acts")
+        # (a rub at one of two disks that a stiff joint couples) or do better (measured
+        # in docs/gap.md, "Where the verdict acts")
         rows = fit.details.get("discrete_settings")
         if not rows:
             return None
         classes = [EFFECTS[n] for n in fit.names]
         chosen = {c.name: discrete_settings(fit.state, i, c)
                   for i, c in enumerate(classes) if c.discrete}
-        same_chosen = rows[0]["setting"] == chosen
-        st = self.settings
-        out = [{"setting": chosen, "heldout_gap_after": fit.heldout_excess,
-                "training_cost": fit.state.cost}]
+        own = self._setting_fits.get(fit.names, {})
+        reps = {_setting_key(chosen): (chosen, fit, False)}
         for row in rows:
-            if row["setting"] == chosen:
+            key = _setting_key(row["setting"])
+            if key in reps:
                 continue
             fixed = [row["setting"].get(c.name) if c.discrete else None for c in classes]
             again = self._result(fit.names, self._calibrate(
                 fit.names, starts=[fit.state.x], n_probe=0, fixed=fixed))
-            if fit.cmp is None:
-                share = None
-            elif again.heldout_excess < row["heldout_gap_after"] or not same_chosen:
-                share = setting_support(fit.cmp, again.cmp, st.n_bootstrap, st.seed)
-            else:  # its own search did better: its first share stands
-                share = row.get("chosen_preferred_share")
-            best = again if again.heldout_excess < row["heldout_gap_after"] else None
-            out.append({"setting": row["setting"],
-                        "heldout_gap_after": (best.heldout_excess if best is not None
-                                              else row["heldout_gap_after"]),
-                        "training_cost": (best.state.cost if best is not None
-                                          else row["training_cost"]),
-                        **({"from_chosen_fit": True} if best is not None else {}),
-                        **({} if share is None else {"chosen_preferred_share": share})})
-        out[1:] = sorted(out[1:], key=lambda r: r["heldout_gap_after"])
-        return _setting_evidence(out, st.decided_setting_support)
+            first = own.get(key)
+            better_first = first is not None and first.heldout_excess <= again.heldout_excess
+            reps[key] = ((row["setting"], first, False) if better_first
+                         else (row["setting"], again, True))
+        # a model-error member (the linear-form test) is not refitted with the setting:
+        # such a verdict keeps its setting and only learns how firmly it was chosen
+        movable = not fit.details.get("model_error")
+        best_key = min(reps, key=lambda k: reps[k][1].heldout_excess) if movable else \
+            _setting_key(chosen)
+        best = reps[best_key][1]
+        st = self.settings
+        out = [{"setting": reps[best_key][0], "heldout_gap_after": best.heldout_excess,
+                "training_cost": best.state.cost,
+                **({"from_chosen_fit": True} if reps[best_key][2] else {})}]
+        for key, (setting, f, refitted) in sorted(
+                reps.items(), key=lambda kv: kv[1][1].heldout_excess):
+            if key == best_key:
+                continue
+            out.append({"setting": setting, "heldout_gap_after": f.heldout_excess,
+                        "training_cost": f.state.cost,
+                        **({"from_chosen_fit": True} if refitted else {}),
+                        **({} if best.cmp is None else {"chosen_preferred_share":
+                            setting_support(best.cmp, f.cmp, st.n_bootstrap, st.seed)})})
+        entries = _setting_evidence(out, st.decided_setting_support)
+        if best is fit:
+            return entries, None
+        # another setting fits the held-out speeds better: it replaces the verdict's fit
+        return entries, best
 
     def linear_forms(self, fit):
         # the member's linear form starts from its fitted instance, the others keep
@@ -574,7 +594,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            recheck_choice(front, choice)
+            choice, ranked = recheck_choice(front, choice, ranked, E0, cmp0, settings,
+                                            n_features, e0)
         tick("verdict's other settings refitted from its fit")
     doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
     if isinstance(choice, dict):
