@@ -1035,7 +1035,7 @@ def _stub_front_end(monkeypatch, setting):
     monkeypatch.setattr(diagnosis, "discrete_settings", lambda state, i, cls: setting)
     monkeypatch.setattr(diagnosis, "effect_blocks", lambda x, classes: [x[:1], x[1:]])
     fe = object.__new__(diagnosis._SweepFrontEnd)
-    fe._lead_x, fe._setting_evidence, fe._setting_fits = None, {}, {}
+    fe._lead_x, fe._setting_fits = None, {}
     fe._calibrate = lambda names, **kw: None
     fe._result = lambda names, cal: CandidateFit(names, {}, {}, 5, 1.0, None, {}, None)
 
@@ -1059,12 +1059,13 @@ def test_a_continued_or_refitted_candidate_keeps_its_setting_evidence(monkeypatc
     assert more.details["discrete_settings"] is rows
     assert more.details["setting_decided"] is False
 
-    fe._setting_evidence[("rub",)] = {"discrete_settings": rows, "setting_decided": True}
+    single = {"discrete_settings": rows, "setting_decided": True}
+    fe._setting_fits[("rub",)] = {"O1": fit(("rub",), single)}
     pair = fit(("rub", "runout"), {})
     member = fe.refit_members(pair)[0]
     assert member.details["setting_decided"] is True
     fe, fit = _stub_front_end(monkeypatch, {"at": "O2"})  # the pair put the rub at O2
-    fe._setting_evidence[("rub",)] = {"discrete_settings": rows, "setting_decided": True}
+    fe._setting_fits[("rub",)] = {"O1": fit(("rub",), single)}
     member = fe.refit_members(fit(("rub", "runout"), {}))[0]
     assert member.details["setting_decided"] is False
 

@@ -214,6 +214,21 @@ def _setting_key(setting) -> tuple:
     return tuple((n, tuple(sorted(d.items()))) for n, d in sorted(setting.items()))
 
 
+def _setting_rows(fits, settings):
+    """A candidate's discrete-setting entries from ``(setting, fit, refitted)`` per
+    setting, the chosen one first: each setting's held-out excess and training cost
+    and, for the others, how often the held-out speeds prefer the chosen one
+    (``refitted``: refitted from the chosen candidate's fit, see ``recheck_setting``)."""
+    best = fits[0][1]
+    rows = [{"setting": setting, "heldout_gap_after": f.heldout_excess,
+             "training_cost": f.state.cost,
+             **({"from_chosen_fit": True} if refitted else {}),
+             **({} if f is best or best.cmp is None else {"chosen_preferred_share":
+                 setting_support(best.cmp, f.cmp, settings.n_bootstrap, settings.seed)})}
+            for setting, f, refitted in fits]
+    return _setting_evidence(rows, settings.decided_setting_support)
+
+
 def _setting_evidence(rows, level):
     """A candidate's discrete-setting entries: the rows (chosen first) and whether the
     held-out speeds prefer the chosen setting over every other in ``level`` of their
@@ -234,9 +249,8 @@ class _SweepFrontEnd(FrontEnd):
         # each probe's cost by effects, discrete settings and point: a pair's probes
         # are its partner's probes on top of the lead, scored once
         self._probe_costs = {}
-        # each single's discrete-setting evidence, for the refits that replace it, and
-        # each candidate's fit per setting, for the verdict's recheck
-        self._setting_evidence = {}
+        # each candidate's fit per discrete setting, best first: a pair member's refit
+        # takes its single's evidence from it, the verdict's recheck its other settings
         self._setting_fits = {}
 
     def _result(self, names, cal, classes=None):
@@ -284,19 +298,14 @@ class _SweepFrontEnd(FrontEnd):
             # often a bootstrap over the held-out speeds prefers the chosen one, so a
             # setting the held-out speeds barely separate is seen as such
             classes = [EFFECTS[n] for n in names]
-            best, st = fits[0], self.settings
-            rows = [{"setting": {c.name: discrete_settings(f.state, i, c)
-                                 for i, c in enumerate(classes) if c.discrete},
-                     "heldout_gap_after": f.heldout_excess, "training_cost": f.state.cost,
-                     **({} if f is best or best.cmp is None else
-                        {"chosen_preferred_share": setting_support(
-                            best.cmp, f.cmp, st.n_bootstrap, st.seed)})}
-                    for f in fits]
-            best.details.update(_setting_evidence(rows, st.decided_setting_support))
-            self._setting_fits[names] = {_setting_key(r["setting"]): f
-                                         for r, f in zip(rows, fits, strict=True)}
-            if len(names) == 1:
-                self._setting_evidence[names] = best.details
+            settings = [{c.name: discrete_settings(f.state, i, c)
+                         for i, c in enumerate(classes) if c.discrete} for f in fits]
+            fits[0].details.update(_setting_rows(
+                [(st, f, False) for st, f in zip(settings, fits, strict=True)],
+                self.settings))
+            # best first (dicts keep their order): the single's evidence is its first's
+            self._setting_fits[names] = {_setting_key(st): f
+                                         for st, f in zip(settings, fits, strict=True)}
         return fits[0]
 
     def fit(self, names):
@@ -351,7 +360,8 @@ class _SweepFrontEnd(FrontEnd):
             refit = self._result((name,), cal)
             # the member's setting came from the pair: its single's evidence holds
             # only where the single chose the same one
-            single = self._setting_evidence.get((name,))
+            first = next(iter(self._setting_fits.get((name,), {}).values()), None)
+            single = first.details if first is not None else None
             if single is not None:
                 same = single["discrete_settings"][0]["setting"].get(name) == setting
                 refit.details.update({"discrete_settings": single["discrete_settings"],
@@ -389,20 +399,9 @@ class _SweepFrontEnd(FrontEnd):
         best_key = min(reps, key=lambda k: reps[k][1].heldout_excess) if movable else \
             _setting_key(chosen)
         best = reps[best_key][1]
-        st = self.settings
-        out = [{"setting": reps[best_key][0], "heldout_gap_after": best.heldout_excess,
-                "training_cost": best.state.cost,
-                **({"from_chosen_fit": True} if reps[best_key][2] else {})}]
-        for key, (setting, f, refitted) in sorted(
-                reps.items(), key=lambda kv: kv[1][1].heldout_excess):
-            if key == best_key:
-                continue
-            out.append({"setting": setting, "heldout_gap_after": f.heldout_excess,
-                        "training_cost": f.state.cost,
-                        **({"from_chosen_fit": True} if refitted else {}),
-                        **({} if best.cmp is None else {"chosen_preferred_share":
-                            setting_support(best.cmp, f.cmp, st.n_bootstrap, st.seed)})})
-        entries = _setting_evidence(out, st.decided_setting_support)
+        others = sorted((v for k, v in reps.items() if k != best_key),
+                        key=lambda v: v[1].heldout_excess)
+        entries = _setting_rows([reps[best_key], *others], self.settings)
         if best is fit:
             return entries, None
         # another setting fits the held-out speeds better: it replaces the verdict's fit
