@@ -162,9 +162,9 @@ def _undecided_text(doc) -> str:
         return ""
     level = (doc.get("settings") or {}).get("decided_setting_support")
     share = f"{100 * level:.0f} % of" if level is not None else "enough"
-    return (" Where it acts is not decided by these data: another setting fits the "
-            f"held-out speeds nearly as well (the chosen one is preferred in fewer than "
-            f"{share} bootstrap resamples of them; see the ranking's evidence).")
+    return (" Where it acts is not decided by these data: over at least one other "
+            f"setting, the chosen one is preferred in fewer than {share} bootstrap "
+            "resamples of the held-out speeds (see the ranking's evidence).")
 
 
 def _linear_form_text(entry) -> str:
