@@ -136,6 +136,38 @@ def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
     assert abs(_orders(o.t, o[ch], w, 2.0)) > 2 * abs(_orders(f.t, f[ch], w, 2.0))
 
 
+def test_ross_crack_as_written_drops_the_coupling_the_rotated_form_keeps():
+    pytest.importorskip("ross")
+    from plants.ross_paper_rotor import PaperRotorROSS, RossPlant
+
+    crack = {"crack": {"station": "A-O1", "depth": 0.45, "angle": 0.0}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        as_written = RossPlant(PaperRotorROSS(faults=crack)).faults["crack"][0]
+        rotated = RossPlant(PaperRotorROSS(faults=crack, crack_form="rotated")).faults["crack"][0]
+    ix, iy = [0, 4, 6, 10], [1, 3, 7, 9]  # the element's x-plane and y-plane DOFs
+    # a vertical deflection of the element (the static sag's shape, 1 mm at its end)
+    d = np.zeros(12)
+    d[iy] = 1e-3 * np.array([0.0, 0.0, 1.0, 0.0])
+    horizontal = {"as-written": [], "rotated": []}
+    for ap in np.linspace(0.0, 2 * np.pi, 16, endpoint=False):
+        Kw, Kr = as_written.mayes(ap), rotated.mayes(ap)
+        np.testing.assert_allclose(Kr, Kr.T, rtol=0, atol=1e-9 * np.abs(Kr).max())
+        # the same crack in each plane: only the coupling between them differs
+        np.testing.assert_allclose(Kr[np.ix_(ix, ix)], Kw[np.ix_(ix, ix)])
+        np.testing.assert_allclose(Kr[np.ix_(iy, iy)], Kw[np.ix_(iy, iy)])
+        horizontal["as-written"].append(np.abs((Kw @ d)[ix]).max())
+        horizontal["rotated"].append(np.abs((Kr @ d)[ix]).max())
+    vertical = np.abs((as_written.mayes(0.0) @ d)[iy]).max()
+    # as written, a crack turning in a vertically deflected shaft never pushes sideways
+    assert max(horizontal["as-written"]) == 0.0
+    # turned with the shaft, it does whenever its axes are oblique: (k_xi - k_eta) sin cos
+    assert max(horizontal["rotated"]) > 0.05 * vertical
+    assert horizontal["rotated"][0] == pytest.approx(0.0, abs=1e-9 * vertical)
+    with pytest.raises(ValueError, match="crack_form"):
+        RossPlant(PaperRotorROSS(faults=crack, crack_form="skewed"))
+
+
 @pytest.mark.slow
 def test_update_stays_physical_and_finds_where_the_second_plants_dampers_act():
     from sknarx.gap import DiagnosisSettings

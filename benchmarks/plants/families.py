@@ -192,9 +192,9 @@ def _second_sweep(truth, physical, settle, plant=None, speeds=None):
 def _ross_sweep(truth, physical, settle, plant=None, speeds=None):
     from plants.ross_paper_rotor import ross_sweep
 
-    if plant:
-        raise ValueError("the ross family has no plant variants")
-    return ross_sweep(truth, physical, speeds or SPEEDS, CHANNELS, settle=settle)
+    # ``plant``: PaperRotorROSS fields of a variant (analysis; the benchmark sets none)
+    return ross_sweep(truth, physical, speeds or SPEEDS, CHANNELS, settle=settle,
+                      plant=plant)
 
 
 _SWEEP = {"own": (_own_sweep, 2.0), "second": (_second_sweep, 1.5), "ross": (_ross_sweep, 1.0)}
@@ -250,8 +250,9 @@ def measure(clean, truth):
 def make_family_trial(kind, seed, family, plant=None):
     """Measured sweep, truth, and the clean sweeps with and without the effects.
 
-    ``plant``: fields of the family's plant to change (``second`` only; for analysing
-    what of a gap a plant's reading causes -- the benchmark never sets it).
+    ``plant``: fields of the family's plant to change (``second``: ``SecondRotor``;
+    ``ross``: ``PaperRotorROSS``, e.g. its ``crack_form``); for analysing what of a gap
+    a plant's reading causes -- the benchmark never sets it.
     """
     truth = draw_trial(kind, seed, family)
     physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}

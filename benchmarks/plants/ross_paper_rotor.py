@@ -28,7 +28,10 @@ A second engineer's reading of Jin et al. (2022), Tables 1-2, built from ROSS el
 Faults are ROSS's own (``ross.faults``): the Mayes breathing crack on a shaft element
 (Papadopoulos' compliance coefficients), the flexible-coupling misalignment
 (``MisalignmentFlex``, combined parallel and angular) on the element at a bearing, and
-``Rubbing`` at a disk's element; their forces enter through the same hook. ROSS has
+``Rubbing`` at a disk's element; their forces enter through the same hook. (ROSS's
+crack keeps only the diagonal of its stiffness turned into the fixed frame, so it
+has no coupling between the planes; ``crack_form="rotated"`` keeps it, for analysis:
+``benchmarks/bench_ross_crack_form.py``.) ROSS has
 no joint looseness, and the joint element here (a flange, ~8e10 N/m) is far too stiff
 to switch explicitly through the force hook (tried: Newton fails in the first step), so
 this family draws none; support anisotropy is the pedestal's stiffness per direction.
@@ -98,15 +101,33 @@ class PaperRotorROSS:
     zeta_pedestal: float = 0.05
     gravity: float = 9.81
     faults: dict = field(default_factory=dict)
+    #: "as-written": ROSS 2.3's Mayes crack, which keeps only the diagonal of the
+    #: cracked element's stiffness turned into the fixed frame; "rotated": the same crack
+    #: (ROSS's compliances, element and breathing) with the off-diagonal term kept
+    #: (analysis only, see ``_crack_class``; the benchmark draws "as-written")
+    crack_form: str = "as-written"
 
 
-def _crack_class():
+def _crack_class(form="as-written"):
     """ROSS's crack with its compliance table read by ``json``: ROSS 2.3 parses the
     table's "[value, depth]" strings with ``pandas.eval`` on a Series, which pandas 3
-    refuses; the coefficients and the model are ROSS's."""
+    refuses; the coefficients and the model are ROSS's.
+
+    ``form="rotated"`` keeps the term ROSS drops. ROSS's Mayes crack turns the cracked
+    element's stiffness from the crack's frame into the fixed one, ``K = T^T diag(k_xi,
+    k_eta) T``, and then builds the element from ``K[0, 0]`` and ``K[1, 1]`` alone; the
+    off-diagonal ``K[0, 1] = (k_xi - k_eta) sin cos`` -- the coupling between the two
+    planes that a crack turning with the shaft has in the fixed frame -- is dropped, so
+    a crack loaded by the static (vertical) deflection pushes almost nothing
+    horizontally. The rotated form adds it on the element's translational degrees of
+    freedom, with ROSS's own maps from the crack's cantilever to the element's ends.
+    """
     import json
 
     from ross.faults.crack import Crack
+
+    if form not in ("as-written", "rotated"):
+        raise ValueError(f"crack_form must be 'as-written' or 'rotated', not {form!r}")
 
     class _Crack(Crack):
         def _get_coefficient(self, coeff):
@@ -115,7 +136,28 @@ def _crack_class():
             nu, E = self.shaft_elem.material.Poisson, self.shaft_elem.material.E
             return c[ind[0], 0] * (1 - nu**2) / (E * (self.shaft_elem.odl / 2) ** 3)
 
-    return _Crack
+    if form == "as-written":
+        return _Crack
+
+    class _RotatedCrack(_Crack):
+        def mayes(self, ap):
+            ko, kcx, kcz = self.Ko[0, 0], self.Kc[0, 0], self.Kc[1, 1]
+            k_xi = 0.5 * (ko + kcx) + 0.5 * (ko - kcx) * np.cos(ap)
+            k_eta = 0.5 * (ko + kcz) + 0.5 * (ko - kcz) * np.cos(ap)
+            T = np.array([[np.cos(ap), np.sin(ap)], [-np.sin(ap), np.cos(ap)]])
+            k_fixed = T.T @ np.diag([k_xi, k_eta]) @ T
+            K = self._compute_crack_stiffness_gasch_mayes(k_fixed)
+            # ROSS's maps (its Toxy, Toyz) of the cantilever's tip displacement to the
+            # element's (x, theta_y) and (y, theta_x) ends, at DOFs 0, 4, 6, 10 and
+            # 1, 3, 7, 9 of its 12
+            L = self.shaft_elem.L
+            coupling = k_fixed[0, 1] * np.outer([-1.0, -L, 1.0, 0.0], [-1.0, L, 1.0, 0.0])
+            ix, iy = [0, 4, 6, 10], [1, 3, 7, 9]
+            K[np.ix_(ix, iy)] += coupling
+            K[np.ix_(iy, ix)] += coupling.T
+            return K
+
+    return _RotatedCrack
 
 
 def _diameter(k, L, factor):
@@ -213,7 +255,7 @@ class RossPlant:
         from ross.faults.rubbing import Rubbing
 
         f, out = self.p.faults, {}
-        _Crack = _crack_class()
+        _Crack = _crack_class(self.p.crack_form)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if "crack" in f:
@@ -334,9 +376,10 @@ class RossPlant:
         return pd.concat(parts, ignore_index=True)
 
 
-def ross_sweep(truth, physical, speeds, channels, settle=1.0):
-    """A blind trial's sweep on the ROSS plant (see ``plants.families``)."""
-    m, p = truth["mismatch"], PaperRotorROSS()
+def ross_sweep(truth, physical, speeds, channels, settle=1.0, plant=None):
+    """A blind trial's sweep on the ROSS plant (see ``plants.families``); ``plant``:
+    ``PaperRotorROSS`` fields of a variant (analysis only: ``crack_form``)."""
+    m, p = truth["mismatch"], PaperRotorROSS(**(plant or {}))
     faults = {k: v for k, v in physical.items() if k not in ("clearance", "anisotropy")}
     p = replace(
         p, k1=p.k1 * m["k1"], k2=p.k2 * m["k2"], c_a=p.c_a * m["c_a"], c_b=p.c_b * m["c_b"],
