@@ -566,20 +566,22 @@ def test_the_step_needs_only_the_eigenproblems_around_the_speed(omega, fs):
 
 @settings(max_examples=25, deadline=None, derandomize=True)
 @given(depth=st.floats(0.0, 0.6), angle=st.floats(-np.pi, np.pi),
-       mean=st.floats(0.7, 1.4), station=st.sampled_from(R.BreathingCrack.STATIONS))
+       mean=st.floats(0.7, 1.4), station=st.sampled_from(R.BreathingCrack.STATIONS),
+       opening=st.floats(-np.pi, np.pi))
 def test_a_cracks_mean_scale_is_its_element_stiffness_over_a_revolution(depth, angle, mean,
-                                                                        station):
+                                                                        station, opening):
     # the calibration searches a crack by its mean stiffness (depth then moves only the
     # breathing): the kernel's force averaged over the shaft angle is that of an
-    # uncracked element of stiffness mean_scale
+    # uncracked element of stiffness mean_scale, wherever the crack opens
     from sknarx.gap.calibration import search_vector
     from sknarx.rotor.effects import EffectContext
 
     crack = R.BreathingCrack.from_params({"depth": depth, "angle": angle,
-                                          "mean_scale": mean, "station": station})
+                                          "mean_scale": mean, "station": station,
+                                          "opening": opening})
     assert crack.mean_scale == pytest.approx(mean)
-    np.testing.assert_allclose(search_vector(crack), [depth, angle, np.log10(mean)],
-                               atol=1e-12)
+    np.testing.assert_allclose(search_vector(crack),
+                               [depth, angle, np.log10(mean), opening], atol=1e-12)
     ctx = EffectContext(q_static=np.zeros(12), params=R.RotorParameters())
     q = np.random.default_rng(1).normal(size=12) * 1e-5
 
@@ -596,3 +598,33 @@ def test_a_cracks_mean_scale_is_its_element_stiffness_over_a_revolution(depth, a
     uncracked = force(R.BreathingCrack(depth=0.0, element_scale=mean, station=station), 0.0)
     np.testing.assert_allclose(mean_force, uncracked, atol=1e-9 * np.abs(uncracked).max()
                                + 1e-15)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(depth=st.floats(0.05, 0.6), angle=st.floats(-np.pi, np.pi),
+       opening=st.floats(-np.pi, np.pi), phi=st.floats(-np.pi, np.pi),
+       station=st.sampled_from(R.BreathingCrack.STATIONS))
+def test_a_crack_is_open_where_its_normal_points_at_its_opening(depth, angle, opening, phi,
+                                                                 station):
+    # h = (1 + cos(phi + angle - opening))/2: shut when the normal points away from the
+    # opening direction, and two cracks opening on opposite sides share one open crack's
+    # force between them at every angle (h + h' = 1)
+    from sknarx.rotor.effects import EffectContext
+
+    ctx = EffectContext(q_static=np.zeros(12), params=R.RotorParameters())
+    q = np.random.default_rng(2).normal(size=12) * 1e-5
+
+    def force(opening, phi):
+        kernel, p = R.BreathingCrack(depth=depth, angle=angle, station=station,
+                                     opening=opening).force_kernel(ctx)
+        out = np.zeros(12)
+        kernel(0.0, phi, 150.0, 0.0, q, np.zeros(12), p, out)
+        return out
+
+    scale = np.abs(force(opening, opening - angle)).max()
+    assert scale > 0
+    np.testing.assert_allclose(force(opening, opening - angle + np.pi), 0.0,
+                               atol=1e-12 * scale)
+    shared = force(opening, phi) + force(opening + np.pi, phi)
+    fully_open = force(phi + angle, phi)  # opening where the normal points now: h = 1
+    np.testing.assert_allclose(shared, fully_open, atol=1e-9 * scale)

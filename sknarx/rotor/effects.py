@@ -352,8 +352,9 @@ class Misalignment(Effect):
 def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     # p: lost stiffness, crack angle, then the cracked element's deformation in each
     # plane as four (DOF index, coefficient) pairs: x plane from p[2], y plane from p[10],
-    # then the element's stiffness change in every direction (p[18])
-    dk, psi, ds = p[0], p[1], p[18]
+    # then the element's stiffness change in every direction (p[18]) and the direction
+    # the crack's normal points at when it is fully open (p[19])
+    dk, psi, ds, opening = p[0], p[1], p[18], p[19]
     dx = 0.0
     dy = 0.0
     for k in range(4):
@@ -361,8 +362,9 @@ def _crack_kernel(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
         dy += p[11 + 2 * k] * q[int(p[10 + 2 * k])]
     nx, ny = math.cos(phi + psi), math.sin(phi + psi)
     xi = nx * dx + ny * dy
-    # gravity-driven breathing (Mayes & Davies): fully open when the crack faces down
-    h = 0.5 * (1.0 - math.cos(phi + psi + 0.5 * math.pi))
+    # breathing (Mayes & Davies): fully open when the normal points at ``opening``, the
+    # tension side of the static bending at the crack
+    h = 0.5 * (1.0 + math.cos(phi + psi - opening))
     f = dk * h * xi  # the cracked direction loses stiffness dk: add back dk*h*xi
     # ... and the element is ds stiffer in every direction (restoring -ds * deformation)
     fx, fy = f * nx - ds * dx, f * ny - ds * dy
@@ -418,11 +420,17 @@ class BreathingCrack(Effect):
     The cracked element (shaft segment A-O1, the bolted joint with the shaft through
     it, or segment O2-B: ``station``) loses a fraction ``depth`` of its lateral
     stiffness in the direction normal to the crack, which rotates with the shaft at
-    angle ``phi + angle``; gravity opens and closes it once per revolution with the
-    breathing function ``h = (1 - cos(phi + angle + pi/2))/2`` (Mayes & Davies,
-    1984; Gasch, J. Sound Vib. 1993). The station is searched as a discrete
-    parameter (``discrete``). Signature: 2x (and 3x) rising near half the critical
-    speed; a small 1x change.
+    angle ``phi + angle``; the static bending opens and closes it once per revolution
+    with the breathing function ``h = (1 + cos(phi + angle - opening))/2`` (Mayes &
+    Davies, 1984; Gasch, J. Sound Vib. 1993): fully open when the normal points at
+    ``opening`` (rad, in the fixed x-y frame), the tension side of the static bending
+    at the crack. Gravity alone bends the shaft in the vertical plane, but which side
+    is in tension depends on where along the element the crack sits (the bending
+    moment of a span between a bearing and a disk changes sign along it) and static
+    loads that are not vertical (a misaligned bearing, a bow) turn it, so it is
+    searched; ``pi/2`` (the normal along +y) is the model's gravity-driven default.
+    The station is searched as a discrete parameter (``discrete``). Signature: 2x (and
+    3x) rising near half the critical speed; a small 1x change.
 
     ``element_scale`` is the cracked element's stiffness (closed) relative to the
     model's: a crack's mean loss of stiffness is linear and looks to the 1x like a
@@ -451,17 +459,19 @@ class BreathingCrack(Effect):
     angle: float = 0.0
     station: str = "A-O1"
     element_scale: float = 1.0
+    opening: float = 0.5 * math.pi
     name = "crack"
     STATIONS = ("A-O1", "joint", "O2-B")
     bounds = {"depth": (0.0, 0.6, "lin"), "angle": (-math.pi, math.pi, "lin"),
-              "mean_scale": (0.7, 1.4, "log")}
+              "mean_scale": (0.7, 1.4, "log"), "opening": (-math.pi, math.pi, "lin")}
     #: where a calibration starts the parameters (the others: a quarter into the range)
-    start = {"mean_scale": 1.0}
+    start = {"mean_scale": 1.0, "opening": 0.5 * math.pi}
     #: settings searched over a list rather than a range (the calibration probes each)
     discrete = {"station": STATIONS}
     units = {"depth": "- (stiffness lost, open)", "angle": "rad", "station": "",
              "element_scale": "- (element stiffness, closed / model's)",
-             "mean_scale": "- (element stiffness, mean over a revolution / model's)"}
+             "mean_scale": "- (element stiffness, mean over a revolution / model's)",
+             "opening": "rad (the normal's direction when fully open)"}
     signature = "2x and 3x, peaking near 1/2 and 1/3 of the critical speed"
 
     def __post_init__(self):
@@ -485,7 +495,7 @@ class BreathingCrack(Effect):
     def force_kernel(self, context):
         k, pairs = _crack_element(self.station, context.params, context.dof_index)
         return _crack_kernel, np.array([self.depth * k, self.angle, *pairs,
-                                        (self.element_scale - 1.0) * k])
+                                        (self.element_scale - 1.0) * k, self.opening])
 
 
 @njit(nogil=True, cache=True)
