@@ -429,6 +429,8 @@ class BreathingCrack(Effect):
     moment of a span between a bearing and a disk changes sign along it) and static
     loads that are not vertical (a misaligned bearing, a bow) turn it, so it is
     searched; ``pi/2`` (the normal along +y) is the model's gravity-driven default.
+    ``(angle, opening)`` and ``(angle + pi, opening + pi)`` are one crack (the
+    normal's sign only says which side opens, and that turns with it).
     The station is searched as a discrete parameter (``discrete``). Signature: 2x (and
     3x) rising near half the critical speed; a small 1x change.
 
