@@ -141,17 +141,19 @@ def _crack_class(form="as-written"):
 
     class _RotatedCrack(_Crack):
         def mayes(self, ap):
+            # ROSS's own element (it keeps K[0,0] and K[1,1] of the fixed-frame
+            # stiffness), plus the off-diagonal term it drops:
+            # (k_xi - k_eta) sin(ap) cos(ap), with ROSS's breathing k_xi, k_eta
+            K = super().mayes(ap)
             ko, kcx, kcz = self.Ko[0, 0], self.Kc[0, 0], self.Kc[1, 1]
             k_xi = 0.5 * (ko + kcx) + 0.5 * (ko - kcx) * np.cos(ap)
             k_eta = 0.5 * (ko + kcz) + 0.5 * (ko - kcz) * np.cos(ap)
-            T = np.array([[np.cos(ap), np.sin(ap)], [-np.sin(ap), np.cos(ap)]])
-            k_fixed = T.T @ np.diag([k_xi, k_eta]) @ T
-            K = self._compute_crack_stiffness_gasch_mayes(k_fixed)
+            k_xy = (k_xi - k_eta) * np.sin(ap) * np.cos(ap)
             # ROSS's maps (its Toxy, Toyz) of the cantilever's tip displacement to the
             # element's (x, theta_y) and (y, theta_x) ends, at DOFs 0, 4, 6, 10 and
             # 1, 3, 7, 9 of its 12
             L = self.shaft_elem.L
-            coupling = k_fixed[0, 1] * np.outer([-1.0, -L, 1.0, 0.0], [-1.0, L, 1.0, 0.0])
+            coupling = k_xy * np.outer([-1.0, -L, 1.0, 0.0], [-1.0, L, 1.0, 0.0])
             ix, iy = [0, 4, 6, 10], [1, 3, 7, 9]
             K[np.ix_(ix, iy)] += coupling
             K[np.ix_(iy, ix)] += coupling.T
