@@ -853,7 +853,7 @@ def test_the_diagnosis_integrates_at_its_own_step_factor():
 
 
 def test_probes_scale_with_the_number_of_probed_parameters():
-    """A one-parameter clearance gets 16 probes, a three-parameter crack the full 64
+    """A two-parameter clearance gets 32 probes, a four-parameter crack the full 64
     (per station), each with the start itself: the probe cache holds one cost each."""
     from sknarx.gap.calibration import calibrate
     from sknarx.rotor import EFFECTS
@@ -861,7 +861,7 @@ def test_probes_scale_with_the_number_of_probed_parameters():
     measured, _ = make_trial("clearance", 2, speeds=SPEEDS[:4], n_samples=400)
     model, meas, train, _ = _calibration_setup(measured)
     cal0 = calibrate(model, meas, train, (), max_nfev=2)
-    for name, expected in (("clearance", 16 + 1), ("crack", 3 * (64 + 1))):
+    for name, expected in (("clearance", 32 + 1), ("crack", 3 * (64 + 1))):
         cache = {}
         calibrate(model, meas, train, [EFFECTS[name]], starts=[cal0.x], max_nfev=0,
                   n_probe=64, probes_per_parameter=16, probe_cache=cache)

@@ -628,3 +628,25 @@ def test_a_crack_is_open_where_its_normal_points_at_its_opening(depth, angle, op
     shared = force(opening, phi) + force(opening + np.pi, phi)
     fully_open = force(phi + angle, phi)  # opening where the normal points now: h = 1
     np.testing.assert_allclose(shared, fully_open, atol=1e-9 * scale)
+
+
+@settings(max_examples=40, deadline=None)
+@given(scale=st.floats(0.5, 2.0), kB_B=st.one_of(st.none(), st.floats(5e9, 2e10)),
+       clearance=st.floats(5e-7, 5e-5))
+def test_the_clearance_changes_both_bearings_clearance_and_contact_stiffness(scale, kB_B,
+                                                                            clearance):
+    """The clearance candidate is one change of both bearings: each gets the clearance,
+    and each keeps its own contact stiffness times ``contact_scale`` (a bearing B
+    that shares A's stiffness keeps sharing it scaled); nothing else moves."""
+    params = R.RotorParameters(kB_B=kB_B, clearance_B=2e-6)
+    changed = R.ClearanceChange(clearance=clearance, contact_scale=scale).modify_parameters(
+        params)
+    assert changed.resolved("clearance_B") == changed.clearance == clearance
+    assert changed.kB == pytest.approx(params.kB * scale, rel=1e-12)
+    assert changed.resolved("kB_B") == pytest.approx(params.resolved("kB_B") * scale,
+                                                     rel=1e-12)
+    same = {k for k, v in params.to_dict().items() if changed.to_dict()[k] == v}
+    assert same >= set(params.to_dict()) - {"clearance", "clearance_B", "kB", "kB_B"}
+    # at scale 1 the candidate is the clearance alone, as the simulator's trials draw it
+    plain = R.ClearanceChange(clearance=clearance).modify_parameters(params)
+    assert plain.kB == params.kB and plain.resolved("kB_B") == params.resolved("kB_B")
