@@ -874,9 +874,11 @@ def test_probes_scale_with_the_number_of_probed_parameters():
 
 def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
     """Partners are probed on top of the lead's fit with ``pair_probes_per_parameter``
-    (a one-parameter clearance: 8 probes and the start, a two-parameter looseness: 16
-    and the start), and the pair's fit starts ``pair_short_starts`` short runs per
-    discrete setting; the pair reuses its partner's probes."""
+    per searched parameter, rounded up to a power of two, and the start (a
+    two-parameter clearance or looseness: 16 and the start), and the pair's fit starts
+    ``pair_short_starts`` short runs per discrete setting; the pair reuses its
+    partner's probes."""
+    import math
     from types import SimpleNamespace
 
     from sknarx.gap import DiagnosisSettings
@@ -884,6 +886,10 @@ def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
     from sknarx.gap.calibration import calibrate
     from sknarx.rotor import EFFECTS
 
+    def probes(name):  # the partner's probes and its start
+        return 2 ** math.ceil(math.log2(8 * len(EFFECTS[name].bounds))) + 1
+
+    assert probes("clearance") == probes("looseness") == 16 + 1
     measured, _ = make_trial("clearance", 2, speeds=SPEEDS[:4], n_samples=400)
     model, meas, train, _ = _calibration_setup(measured)
     cal0 = calibrate(model, meas, train, (), max_nfev=2)
@@ -893,9 +899,10 @@ def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
     settings = DiagnosisSettings(pair_probes_per_parameter=8, pair_short_starts=2)
     front = dg._SweepFrontEnd(model, meas, train, train, None, settings, cal0.x)
     front.partners(lead, ["clearance"], 1)
-    assert len(front._probe_costs) == 8 + 1
+    assert len(front._probe_costs) == probes("clearance")
     front.partners(lead, ["looseness"], 1)
-    assert len(front._probe_costs) == 8 + 1 + 16 + 1
+    both = probes("clearance") + probes("looseness")
+    assert len(front._probe_costs) == both
     seen = []
 
     def spy(*args, **kw):
@@ -905,7 +912,7 @@ def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
     monkeypatch.setattr(dg, "calibrate", spy)
     monkeypatch.setattr(dg, "heldout_gap", lambda *a: (1.0, None))
     front.fit_pair(lead, "clearance")
-    assert len(front._probe_costs) == 8 + 1 + 16 + 1  # the partner's probes, reused
+    assert len(front._probe_costs) == both  # the partner's probes, reused
     assert seen[0]["n_short"] == 2 and seen[0]["probes_per_parameter"] == 8
 
 

@@ -167,23 +167,29 @@ def test_the_swept_model_reproduces_the_beat_better_than_any_quasi_steady_fit(di
 
 def test_the_one_gap_core_gives_the_order_domain_path_its_old_answers(diagnosis):
     # measured before the order-domain pipeline became a front end of the gap core
-    # (sknarx 03f326d, its own ranking, decision and bootstrap): the same numbers after
+    # (sknarx 03f326d, its own ranking, decision and bootstrap): the same answers after.
+    # The discrete answers are pinned exactly; the numbers to the spread the same code
+    # shows across dependency versions, not to the last digit: the search stops at its
+    # tolerances, so a last-bit change of a sum (another pandas) moves the held-out
+    # excess by up to 0.65 % and the fitted parameters by up to 0.06 %. Measured on
+    # 1fbf144's code: pandas 2.3.3 and 3.1.1 (scipy 1.17.1, numpy 2.3.5) against these
+    # pins (the binned record identical to 4e-14 in both)
     doc, _ = diagnosis
-    assert doc["gap_before"]["heldout_excess"] == pytest.approx(4891.161423250319, rel=1e-6)
-    assert [r["score"] for r in doc["ranking"][:3]] == pytest.approx(
-        [838.0171707149467, 1978.0777783449264, 3592.6287687459057], rel=1e-6)
     assert [r["effect"] for r in doc["ranking"][:3]] == [["anisotropy", "runout"], "runout",
                                                           "anisotropy"]
-    assert doc["shrink"] == pytest.approx(0.830711542911069, rel=1e-6)
+    assert doc["gap_before"]["heldout_excess"] == pytest.approx(4891.161423250319, rel=2e-2)
+    assert [r["score"] for r in doc["ranking"][:3]] == pytest.approx(
+        [838.0171707149467, 1978.0777783449264, 3592.6287687459057], rel=2e-2)
+    assert doc["shrink"] == pytest.approx(0.830711542911069, rel=2e-3)
     assert doc["shrink_band"] == pytest.approx([0.7511042042848284, 0.8898824546877852],
-                                               rel=1e-6)
+                                               rel=2e-3)
     p = doc["ranking"][0]["params"]
     assert [p["kx"], p["ky"], p["runout_amplitude_m"]] == pytest.approx(
-        [63346.74746820514, 79489.59048912465, 4.571523041462497e-06], rel=1e-6)
+        [63346.74746820514, 79489.59048912465, 4.571523041462497e-06], rel=3e-3)
     assert doc["critical_speeds_rpm"] == pytest.approx([1567.9563253804424,
-                                                        1643.8190527594081], rel=1e-6)
+                                                        1643.8190527594081], rel=1e-3)
     assert doc["nominal_calibration"]["bearing_stiffness_N_per_m"]["calibrated"] == (
-        pytest.approx(66162.51625529808, rel=1e-6))
+        pytest.approx(66162.51625529808, rel=1e-3))
     # the untestable effects: the library's reason from each signature, the rig's own
     # from its rotor file
     why = {r["effect"]: r["reason"] for r in doc["ranking"] if r.get("testable") is False}
