@@ -807,22 +807,38 @@ class ClearanceChange(Effect):
 class SpeedFluctuation(Effect):
     """Sinusoidal speed ripple ``omega (1 + amplitude sin(2 pi frequency t + phase))``.
 
+    ``t`` is each record's own time (0 at its first sample), so ``phase`` (rad) is where
+    the ripple stands when a record starts. It is searched with the amplitude and the
+    frequency: with a ripple of a cycle or a few per record the 1x smear and the
+    sidebands depend on it as much as on the frequency, and a fit held at a wrong phase
+    moves the frequency to make up for it (a 5.8 Hz ripple fitted at 2.9 Hz) and leaves
+    a residual that any flexible partner then takes. One phase serves every record:
+    exact where the records start at the same point of the ripple (a ripple locked to
+    the trigger); where each record starts at its own point, one phase fits the
+    sidebands of a ripple that runs many cycles per record and is an average below that.
+
     Signature: sidebands around 1x at +-``frequency`` (non-synchronous energy),
     smeared 1x amplitude.
+
+    Examples
+    --------
+    >>> from sknarx.rotor import SpeedFluctuation
+    >>> SpeedFluctuation.param_names()
+    ['amplitude', 'frequency', 'phase']
+    >>> ripple = SpeedFluctuation.from_vector([0.02, 3.0, 1.0])
+    >>> round(ripple.phase, 3), ripple.units["phase"]
+    (1.0, 'rad')
     """
 
     amplitude: float = 0.01
     frequency: float = 1.0
     phase: float = 0.0
     name = "speed-fluctuation"
-    bounds = {"amplitude": (0.0, 0.05, "lin"), "frequency": (0.2, 20.0, "log")}
-    units = {"amplitude": "- (of the speed)", "frequency": "Hz"}
+    bounds = {"amplitude": (0.0, 0.05, "lin"), "frequency": (0.2, 20.0, "log"),
+              "phase": (-math.pi, math.pi, "lin")}
+    start = {"phase": 0.0}
+    units = {"amplitude": "- (of the speed)", "frequency": "Hz", "phase": "rad"}
     signature = "non-synchronous sidebands around 1x; 1x amplitude reduced"
-
-    @classmethod
-    def from_vector(cls, x):
-        """The effect with its searched parameters from a calibration vector."""
-        return cls(amplitude=float(x[0]), frequency=float(x[1]))
 
     def modify_speed(self, t, omega, rng):
         return omega * (1.0 + self.amplitude * np.sin(2 * np.pi * self.frequency * t + self.phase))
