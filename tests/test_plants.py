@@ -112,6 +112,50 @@ def test_the_families_read_their_speed_steps_at_call_time(monkeypatch):
     assert list(sweep.speed.unique()) == [100.0, 150.0]
 
 
+def _angle_lag(t, x, w, window=0.2):
+    """How far the 1x of a record lags the nominal shaft angle ``w t`` (rad), in sliding
+    windows: a speed ripple shows as the wander of this lag."""
+    t, x = np.asarray(t), np.asarray(x)
+    n = int(round(window / (t[1] - t[0])))
+    mids, lag = [], []
+    for i in range(0, t.size - n + 1, n // 4):
+        v = _orders(t[i:i + n], x[i:i + n], w, 1.0)
+        mids.append(t[i:i + n].mean())
+        lag.append(np.angle(v))
+    return np.array(mids), np.unwrap(lag)
+
+
+@pytest.mark.parametrize("family", ["own", "second", "ross"])
+def test_every_family_ripples_the_speed_as_drawn(family, monkeypatch):
+    """The speed ripple's drawn phase (``Omega (1 + a cos(2 pi f t + phase))``, ``t`` each
+    record's time) reaches each family's shaft angle: the 1x at a disk wanders by the
+    angle's deviation ``a Omega / (2 pi f) (sin(2 pi f t + phase) - sin(phase))`` (up to a
+    constant: the response lags the angle by the same amount all through a slow ripple
+    far below the critical speed) -- the same law in all three codes."""
+    from plants import families
+
+    if family == "ross":
+        pytest.importorskip("ross")
+    w = 60.0
+    monkeypatch.setattr(families, "SPEEDS", (w,))
+    truth = draw_trial(None, 4, family)
+    ripple = {"amplitude": 0.03, "frequency_hz": 1.5, "phase": 2.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        on = simulate(family, truth, {"speed-fluctuation": ripple})
+        off = simulate(family, truth, {})
+    t = on.t.to_numpy()
+    mid, lag_on = _angle_lag(t, on.xO1.to_numpy(), w)
+    _, lag_off = _angle_lag(t, off.xO1.to_numpy(), w)
+    wander = lag_on - lag_off
+    wf, ph = 2 * np.pi * ripple["frequency_hz"], ripple["phase"]
+    law = ripple["amplitude"] * w / wf * (np.sin(wf * mid + ph) - np.sin(ph))
+    # the windows average the law over 0.2 s; compare shapes about their means
+    a, b = wander - wander.mean(), law - law.mean()
+    assert np.corrcoef(a, b)[0, 1] > 0.95
+    assert np.std(a) == pytest.approx(np.std(b), rel=0.25)
+
+
 @pytest.mark.slow
 def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
     pytest.importorskip("ross")

@@ -61,7 +61,9 @@ def draw_effect(name, rng):
         soft = _log_uniform(rng, 5e6, 5e7)
         return {"soft": soft, "soft_axis": str(rng.choice(["x", "y"]))}
     if name == "speed-fluctuation":
-        return {"amplitude": u(0.005, 0.03), "frequency_hz": _log_uniform(rng, 1.0, 8.0)}
+        # speed Omega (1 + amplitude cos(2 pi frequency t + phase)), t each record's time
+        return {"amplitude": u(0.005, 0.03), "frequency_hz": _log_uniform(rng, 1.0, 8.0),
+                "phase": u(-np.pi, np.pi)}
     if name == "runout":
         return {ch: [u(5e-6, 4e-5), u(-np.pi, np.pi), u(0.0, 0.3), u(-np.pi, np.pi)]
                 for ch in CHANNELS}
@@ -134,8 +136,10 @@ def _own_sweep(truth, physical, settle, plant=None, speeds=None):
             effects.append(EFFECTS[name](kx=kx, ky=ky, mass=15.0,
                                          damping=0.1 * np.sqrt(p["soft"] * 15.0)))
         elif name == "speed-fluctuation":
+            # sknarx's ripple is a sine: a quarter turn ahead of the draw's cosine
             effects.append(EFFECTS[name](amplitude=p["amplitude"],
-                                         frequency=p["frequency_hz"]))
+                                         frequency=p["frequency_hz"],
+                                         phase=p.get("phase", 0.0) + 0.5 * np.pi))
         elif name == "thermal-bow":
             from sknarx.testing import ThermalBow
 
@@ -180,7 +184,7 @@ def _second_sweep(truth, physical, settle, plant=None, speeds=None):
             eff[name] = ([p["soft"], rotor.k_py] if p["soft_axis"] == "x"
                          else [rotor.k_px, p["soft"]])
         elif name == "speed-fluctuation":
-            eff[name] = [p["amplitude"], 2 * np.pi * p["frequency_hz"]]
+            eff[name] = [p["amplitude"], 2 * np.pi * p["frequency_hz"], p.get("phase", 0.0)]
         elif name == "thermal-bow":
             eff[name] = [p["bow"], p["angle"]]
         elif name == "gear-mesh":

@@ -288,7 +288,10 @@ class RossPlant:
         if sf is None:
             return w * t, np.full_like(t, w * w)
         a, wf = sf["amplitude"], 2 * np.pi * sf["frequency_hz"]
-        return w * t + a * w / wf * np.sin(wf * t), (w * (1 + a * np.cos(wf * t))) ** 2
+        ph = sf.get("phase", 0.0)  # where the ripple stands when the record starts
+        # the angle is the speed's integral from t = 0, where it is zero
+        return (w * t + a * w / wf * (np.sin(wf * t + ph) - np.sin(ph)),
+                (w * (1 + a * np.cos(wf * t + ph))) ** 2)
 
     def _forces(self, w, t):
         p, nd = self.p, self.nd

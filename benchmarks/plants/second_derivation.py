@@ -41,7 +41,8 @@ Effects, each written from its source (parameters in SI):
 * ``clearance`` -- a larger radial clearance of both ball bearings.
 * ``anisotropy`` -- pedestals softer in one direction (``k_px`` != ``k_py``), with the
   housings' mass and damping: a support resonance of its own.
-* ``speed-fluctuation`` -- ``Omega (1 + a cos(w_f t))``.
+* ``speed-fluctuation`` -- ``Omega (1 + a cos(w_f t + ph))``, ``t`` each record's time
+  (the ripple's phase ``ph`` where a record starts).
 * out of library: ``thermal-bow`` (a bowed segment A-O1: a rotating force ``k1 bow``),
   ``gear-mesh`` (a mesh force at 7x on disk O2, my own design).
 """
@@ -198,10 +199,11 @@ def _forces(t, q, v, w, scal, eff, f, ramp):  # pragma: no cover
     phi = w * t
     wdot2 = w * w
     for r in range(eff.shape[0]):
-        if eff[r, 0] == 4:  # speed fluctuation: Omega (1 + a cos(w_f t))
-            a, wf = eff[r, 1], eff[r, 2]
-            phi = w * t + a * w / wf * math.sin(wf * t)
-            wdot2 = (w * (1.0 + a * math.cos(wf * t))) ** 2
+        if eff[r, 0] == 4:  # speed fluctuation: Omega (1 + a cos(w_f t + ph))
+            a, wf, ph = eff[r, 1], eff[r, 2], eff[r, 3]
+            # the shaft angle is the speed's integral from t = 0, where it is zero
+            phi = w * t + a * w / wf * (math.sin(wf * t + ph) - math.sin(ph))
+            wdot2 = (w * (1.0 + a * math.cos(wf * t + ph))) ** 2
     # unbalance on both disks
     wdot2 *= ramp
     f[XO1] += mO1e * wdot2 * math.cos(phi + phO1)
