@@ -79,6 +79,28 @@ def test_features_extracted_in_the_simulation_threads_equal_those_of_the_records
         assert np.array_equal(a, b)
 
 
+def test_several_points_simulated_together_equal_each_alone():
+    """Probes and a difference Jacobian's columns share the two threads' queue: each
+    point's features are bit for bit those of the point alone, and a point whose
+    simulation fails gets its own exception without touching the others."""
+    from sknarx.gap.calibration import SweepModel
+    from sknarx.rotor import ProbeRunout, RotorParameters
+
+    model = SweepModel(RotorParameters(), 1000.0, 500, ("xO1", "yA"), transient_s=0.2)
+    points = [(np.array([1.02, 0.1, 0.99, 1.03]), (ProbeRunout(amplitude=1e-5),)),
+              (np.array([1.0, 0.0, 1.0, 1.0]), ("not an effect",)),
+              (np.array([0.9, -0.2, 1.05, 0.8]), ())]
+    together = model.feature_arrays_many(SPEEDS[:3], points)
+    assert isinstance(together[1], Exception)
+    for i in (0, 2):
+        alone = model.feature_arrays(SPEEDS[:3], *points[i])
+        assert together[i][0] == alone[0]
+        for a, b in zip(together[i][1:], alone[1:], strict=True):
+            assert np.array_equal(a, b)
+    with pytest.raises(type(together[1])):
+        model.feature_arrays(SPEEDS[:3], *points[1])
+
+
 def test_a_fixed_frequency_line_walks_across_order_bands():
     f = pd.concat([_table(w, noise=1e-7, extra=lambda t: 5e-6 * np.sin(2 * np.pi * 50 * t))
                    for w in (100.0, 250.0)])
@@ -960,6 +982,31 @@ def test_the_secant_jacobian_of_an_affine_residual_is_exact_at_every_step(refres
         jac.residual(x)
         np.testing.assert_allclose(jac(x), A, rtol=1e-5, atol=1e-6)
     assert jac.n_differenced == -(-7 // refresh)  # the first call and every refresh-th
+
+
+def test_a_difference_jacobian_evaluated_in_one_batch_is_the_same():
+    """``many`` evaluates a difference Jacobian's columns in one call: the same
+    Jacobians, one call per differenced Jacobian."""
+    from sknarx.gap.jacobian import SecantJacobian
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 4))
+
+    def fun(x):
+        return np.tanh(A @ x) + x[0] * x[1]
+
+    batches = []
+    lo, hi = -np.ones(4), np.ones(4)
+    one = SecantJacobian(fun, lo, hi, refresh=2)
+    many = SecantJacobian(fun, lo, hi, refresh=2,
+                          many=lambda xs: batches.append(len(xs)) or [fun(x) for x in xs])
+    x = rng.uniform(-0.9, 0.9, 4)
+    for _ in range(5):
+        x = np.clip(x + rng.normal(scale=0.2, size=4), lo, hi)
+        one.residual(x)
+        many.residual(x)
+        assert np.array_equal(one(x), many(x))
+    assert batches == [4] * many.n_differenced and many.n_differenced == 3
 
 
 def test_a_secant_jacobian_least_squares_reaches_the_differenced_one_s_minimum():

@@ -120,19 +120,52 @@ class SweepModel:
         """``then(record)`` of each speed's simulated record, computed in the thread
         that simulated it (so one thread's post-processing overlaps the other's
         integration), in the order of ``speeds``."""
-        sim = self._simulator(nuis, effects, speeds)
+        (out,) = self._per_speed_many(speeds, [(nuis, effects)], then)
+        if isinstance(out, BaseException):
+            raise out
+        return out
+
+    def _per_speed_many(self, speeds, points, then):
+        """:meth:`_per_speed` of several ``(nuis, effects)`` points at once: every
+        point's speeds share the two threads' queue, so a thread that finishes its last
+        speed of one point starts on the next point instead of waiting for the other's
+        last speed (and a point's simulator is built while the last one's run). Each
+        point gets its list of results, or the first exception one of its speeds
+        raised."""
         warm = self.warm or {}
 
-        def one(w):
-            # automatic step: halved if an effect's stiff contact makes it unstable
-            state = warm.get(float(w))
-            run = sim.simulate_columns(float(w), fs=self.fs, n_samples=self.n_samples,
-                                       settle=self.settle_s if state is None else self.lead_s,
-                                       state=state)
-            Y = np.column_stack([run[c] for c in self.channels])
-            return then((float(w), run["t"], Y))
+        def jobs():
+            # lazily: the pool starts on a point's speeds while the next is built
+            for nuis, effects in points:
+                try:
+                    sim = self._simulator(nuis, effects, speeds)
+                except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
+                    sim = exc
+                for w in speeds:
+                    yield sim, float(w)
 
-        return list(_pool().map(one, speeds))
+        def one(job):
+            sim, w = job
+            if isinstance(sim, BaseException):
+                return sim
+            try:
+                # automatic step: halved if an effect's stiff contact makes it unstable
+                state = warm.get(w)
+                run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
+                                           settle=self.settle_s if state is None
+                                           else self.lead_s, state=state)
+                Y = np.column_stack([run[c] for c in self.channels])
+                return then((w, run["t"], Y))
+            except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
+                return exc
+
+        done = list(_pool().map(one, jobs()))
+        n = len(speeds)
+        out = []
+        for i in range(len(points)):
+            part = done[i * n:(i + 1) * n]
+            out.append(next((r for r in part if isinstance(r, BaseException)), part))
+        return out
 
     def features(self, speeds, nuis, effects=()):
         """Order features of the simulated experiment as a DataFrame."""
@@ -142,10 +175,20 @@ class SweepModel:
         return df
 
     def feature_arrays(self, speeds, nuis, effects=()):
+        (out,) = self.feature_arrays_many(speeds, [(nuis, effects)])
+        if isinstance(out, BaseException):
+            raise out
+        return out
+
+    def feature_arrays_many(self, speeds, points):
+        """:meth:`feature_arrays` of several ``(nuis, effects)`` points, run together
+        (see :meth:`_per_speed_many`); a point whose simulation failed gets its
+        exception instead."""
         channels = list(self.channels)
-        return stack_features(self._per_speed(
-            speeds, nuis, effects,
-            lambda record: record_features(record, channels, self.transient_s)))
+        parts = self._per_speed_many(
+            speeds, points, lambda record: record_features(record, channels,
+                                                           self.transient_s))
+        return [p if isinstance(p, BaseException) else stack_features(p) for p in parts]
 
 
 @dataclass
@@ -307,18 +350,29 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)
 
+    def residuals(xs, combo=combos[0], sweep=model):
+        """The residual at each of the points ``xs``, simulated together (probes and a
+        difference Jacobian's columns are independent points)."""
+        points = [_decode(x, classes, log, combo) for x in xs]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            feats = sweep.feature_arrays_many(speeds, points)
+        out = []
+        for f in feats:
+            try:
+                if isinstance(f, BaseException):
+                    raise f
+                _, Sc, se_s, _ = f
+                Sc, _ = project(Sc, se_s)
+                r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
+                                  model_tol=tol)
+            except (SimulationDivergenceError, ValueError, FloatingPointError):
+                r = np.full(size, 1e3)
+            out.append(r if np.all(np.isfinite(r)) else np.full(size, 1e3))
+        return out
+
     def residual(x, combo=combos[0], sweep=model):
-        nuis, effects = _decode(x, classes, log, combo)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                _, Sc, se_s, _ = sweep.feature_arrays(speeds, nuis, effects)
-            Sc, _ = project(Sc, se_s)
-            r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                              model_tol=tol)
-        except (SimulationDivergenceError, ValueError, FloatingPointError):
-            return np.full(size, 1e3)
-        return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
+        return residuals([x], combo, sweep)[0]
 
     def warmed(x, combo):
         # every run of one local search continues the settled runs of its start: a
@@ -370,8 +424,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             keys = [_probe_key(classes, combo, x) for x in points]
             if probe_cache is None or any(k not in probe_cache for k in keys):
                 sweep = warmed(base, combo)
-                for k, x in zip(keys, points, strict=True):
-                    cost = float(np.sum(residual(x, combo, sweep) ** 2))
+                for k, x, r in zip(keys, points, residuals(points, combo, sweep),
+                                   strict=True):
+                    cost = float(np.sum(r ** 2))
                     if probe_cache is not None:
                         probe_cache[k] = cost
                     probes.append((cost, x, combo))
@@ -404,7 +459,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                                  args=(combo, sweep))
         # refresh 1: forward differences at every step, kept for the stop rule
         jac = SecantJacobian(lambda x: residual(x, combo, sweep), lo, hi, diff_step,
-                             refresh or 1)
+                             refresh or 1, many=lambda xs: residuals(xs, combo, sweep))
         stop = SettledStop(jac, settled) if settled is not None else None
         res = least_squares(jac.residual, x0, jac=jac, bounds=(lo, hi), method="trf",
                             x_scale=hi - lo, max_nfev=nfev, callback=stop)

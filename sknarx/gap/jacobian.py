@@ -17,19 +17,24 @@ import numpy as np
 __all__ = ["SecantJacobian", "SettledStop", "forward_difference"]
 
 
-def forward_difference(fun, x, f0, lo, hi, rel_step):
+def forward_difference(fun, x, f0, lo, hi, rel_step, many=None):
     """Forward-difference Jacobian of ``fun`` at ``x`` (``f0 = fun(x)``), each step
     ``rel_step * max(1, |x_j|)`` and turned back where it would leave the bounds (the
-    step scipy's ``'2-point'`` takes)."""
-    J = np.empty((f0.size, x.size))
+    step scipy's ``'2-point'`` takes). ``many(points)``, if given, evaluates all the
+    columns' points in one call (``fun`` of each, in order)."""
+    points, steps = [], []
     for j in range(x.size):
         h = rel_step * (1.0 if x[j] >= 0 else -1.0) * max(1.0, abs(x[j]))
         if not lo[j] <= x[j] + h <= hi[j]:
             h = -h
         xj = x.copy()
         xj[j] += h
-        h = xj[j] - x[j]  # the step actually taken, after rounding
-        J[:, j] = (fun(xj) - f0) / h
+        points.append(xj)
+        steps.append(xj[j] - x[j])  # the step actually taken, after rounding
+    values = many(points) if many is not None else [fun(xj) for xj in points]
+    J = np.empty((f0.size, x.size))
+    for j, (fj, h) in enumerate(zip(values, steps, strict=True)):
+        J[:, j] = (fj - f0) / h
     return J
 
 
@@ -43,13 +48,16 @@ class SecantJacobian:
     Every ``refresh``-th request (the first included) is answered by forward
     differences instead, and so is any request after a rejected step (the residual
     was evaluated more than once since the last request: the secant model
-    mispredicted); ``refresh=1`` is forward differences throughout.
+    mispredicted); ``refresh=1`` is forward differences throughout. ``many(points)``,
+    if given, returns ``fun`` at several points in one call: a difference Jacobian's
+    columns are independent points, evaluated together.
     """
 
-    def __init__(self, fun, lo, hi, rel_step=1e-3, refresh=4):
+    def __init__(self, fun, lo, hi, rel_step=1e-3, refresh=4, many=None):
         if refresh < 1:
             raise ValueError(f"refresh must be a positive number of steps, got {refresh!r}.")
         self.fun, self.lo, self.hi = fun, np.asarray(lo), np.asarray(hi)
+        self.many = many
         self.rel_step, self.refresh = rel_step, int(refresh)
         self._seen = {}  # x bytes -> residual, the latest few evaluations
         self._J = self._x = self._f = None
@@ -63,7 +71,16 @@ class SecantJacobian:
         return self._J
 
     def residual(self, x):
-        f = np.asarray(self.fun(x), dtype=float)
+        return self._remember(x, self.fun(x))
+
+    def residuals(self, xs):
+        """:meth:`residual` of each point, through ``many`` when given."""
+        if self.many is None:
+            return [self.residual(x) for x in xs]
+        return [self._remember(x, f) for x, f in zip(xs, self.many(xs), strict=True)]
+
+    def _remember(self, x, f):
+        f = np.asarray(f, dtype=float)
         self._evaluated += 1
         if len(self._seen) > 8:
             self._seen.pop(next(iter(self._seen)))
@@ -78,7 +95,7 @@ class SecantJacobian:
         rejected = self._evaluated > 1
         if self._J is None or self._calls % self.refresh == 0 or rejected:
             self._J = forward_difference(self.residual, x, f, self.lo, self.hi,
-                                         self.rel_step)
+                                         self.rel_step, many=self.residuals)
             self.n_differenced += 1
         else:
             dx, df = x - self._x, f - self._f
