@@ -129,7 +129,7 @@ class SweepModel:
         """:meth:`_per_speed` of several ``(nuis, effects)`` points at once: every
         point's speeds share the two threads' queue, so a thread that finishes its last
         speed of one point starts on the next point instead of waiting for the other's
-        last speed (and a point's simulator is built while the last one's run). Each
+        last speed (and a point's simulator is built while the last one runs). Each
         point gets its list of results, or the first exception one of its speeds
         raised."""
         warm = self.warm or {}
