@@ -114,23 +114,16 @@ class SweepModel:
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
         releases the GIL), which halves an evaluation on two cores."""
-        return self._per_speed(speeds, nuis, effects, lambda record: record)
+        return _only(self._per_speed(speeds, [(nuis, effects)], lambda record: record))
 
-    def _per_speed(self, speeds, nuis, effects, then):
-        """``then(record)`` of each speed's simulated record, computed in the thread
-        that simulated it (so one thread's post-processing overlaps the other's
-        integration), in the order of ``speeds``."""
-        (out,) = self._per_speed_many(speeds, [(nuis, effects)], then)
-        if isinstance(out, BaseException):
-            raise out
-        return out
-
-    def _per_speed_many(self, speeds, points, then):
-        """:meth:`_per_speed` of several ``(nuis, effects)`` points at once: every
-        point's speeds share the two threads' queue, so a thread that finishes its last
-        speed of one point starts on the next point instead of waiting for the other's
-        last speed (and a point's simulator is built while the last one runs). Each
-        point gets its list of results, or the first exception one of its speeds
+    def _per_speed(self, speeds, points, then):
+        """``then(record)`` of each speed's simulated record for each ``(nuis,
+        effects)`` point, computed in the thread that simulated it (so one thread's
+        post-processing overlaps the other's integration), in the order of ``speeds``.
+        Every point's speeds share the two threads' queue, so a thread that finishes
+        its last speed of one point starts on the next point instead of waiting for the
+        other's last speed (and a point's simulator is built while the last one runs).
+        Each point gets its list of results, or the first exception one of its speeds
         raised."""
         warm = self.warm or {}
 
@@ -146,7 +139,7 @@ class SweepModel:
 
         def one(job):
             sim, w = job
-            if isinstance(sim, BaseException):
+            if isinstance(sim, Exception):
                 return sim
             try:
                 # automatic step: halved if an effect's stiff contact makes it unstable
@@ -164,7 +157,7 @@ class SweepModel:
         out = []
         for i in range(len(points)):
             part = done[i * n:(i + 1) * n]
-            out.append(next((r for r in part if isinstance(r, BaseException)), part))
+            out.append(next((r for r in part if isinstance(r, Exception)), part))
         return out
 
     def features(self, speeds, nuis, effects=()):
@@ -175,20 +168,25 @@ class SweepModel:
         return df
 
     def feature_arrays(self, speeds, nuis, effects=()):
-        (out,) = self.feature_arrays_many(speeds, [(nuis, effects)])
-        if isinstance(out, BaseException):
-            raise out
-        return out
+        return _only(self.feature_arrays_many(speeds, [(nuis, effects)]))
 
     def feature_arrays_many(self, speeds, points):
         """:meth:`feature_arrays` of several ``(nuis, effects)`` points, run together
-        (see :meth:`_per_speed_many`); a point whose simulation failed gets its
-        exception instead."""
+        (see :meth:`_per_speed`); a point whose simulation failed gets its exception
+        instead."""
         channels = list(self.channels)
-        parts = self._per_speed_many(
+        parts = self._per_speed(
             speeds, points, lambda record: record_features(record, channels,
                                                            self.transient_s))
-        return [p if isinstance(p, BaseException) else stack_features(p) for p in parts]
+        return [p if isinstance(p, Exception) else stack_features(p) for p in parts]
+
+
+def _only(results):
+    """The one point's result of a batched call, or its exception raised."""
+    (out,) = results
+    if isinstance(out, Exception):
+        raise out
+    return out
 
 
 @dataclass
@@ -360,7 +358,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         out = []
         for f in feats:
             try:
-                if isinstance(f, BaseException):
+                if isinstance(f, Exception):
                     raise f
                 _, Sc, se_s, _ = f
                 Sc, _ = project(Sc, se_s)
