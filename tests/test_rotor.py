@@ -650,3 +650,67 @@ def test_the_clearance_changes_both_bearings_clearance_and_contact_stiffness(sca
     # at scale 1 the candidate is the clearance alone, as the simulator's trials draw it
     plain = R.ClearanceChange(clearance=clearance).modify_parameters(params)
     assert plain.kB == params.kB and plain.resolved("kB_B") == params.resolved("kB_B")
+
+
+@pytest.mark.parametrize("effects", [(), (R.effects.BreathingCrack(),)], ids=["plain", "crack"])
+def test_the_compiled_integrator_is_plain_rk4_of_the_documented_forces(effects):
+    """The compiled kernel shares trigonometry between RK-4 stages and bearings and sums
+    the linear forces column by column; none of that may change what it integrates:
+    a plain RK-4 of ``M^-1 (F - (C + Omega G) v - K q)`` with the unbalance, gravity,
+    the two bearings' forces and the effect's kernel, over a speed ramp (angular
+    acceleration on), must give the same states to rounding."""
+    from sknarx.rotor.bearings import bearing_force
+    from sknarx.rotor.integrator import integrate
+
+    sim = R.RotorBearingSimulator(effects=effects)
+    s = sim._setup
+    unb, brg = s.unb, s.brg
+    fs, substeps, n = 1000.0, 3, 25
+    omega = np.linspace(140.0, 170.0, n + 1)
+    q0 = s.context.q_static.copy()
+    v0 = np.zeros_like(q0)
+
+    def accel(t, phi, w, al, q, v):
+        f = s.fg.copy()
+        for d in range(2):
+            me, ph, ix, iy = unb[d, 0], unb[d, 1], int(unb[d, 2]), int(unb[d, 3])
+            f[ix] += me * (w * w * np.cos(phi + ph) + al * np.sin(phi + ph))
+            f[iy] += me * (w * w * np.sin(phi + ph) - al * np.cos(phi + ph))
+        for b, (kB, gamma) in enumerate([(brg[0], brg[1]), (brg[9], brg[10])]):
+            ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
+            fx, fy = bearing_force(q[ix], q[iy], phi, kB, gamma, brg[2], int(brg[3]), brg[4])
+            f[ix] += fx
+            f[iy] += fy
+        s.kernel(t, phi, w, al, q, v, s.kparams, f)
+        return s.minv * (f - (s.C + w * s.G) @ v - s.K @ q)
+
+    dt = 1.0 / fs
+    h = dt / substeps
+    q, v, phi = q0.copy(), v0.copy(), 0.0
+    expected = [q.copy()]
+    for k in range(n):
+        wk, al = omega[k], (omega[k + 1] - omega[k]) / dt
+        for sub in range(substeps):
+            tau = sub * h
+            ta, wa = k * dt + tau, wk + al * tau
+            pa = phi + wk * tau + 0.5 * al * tau**2
+            stages = [(ta, pa, wa), (ta + h / 2, pa + wa * h / 2 + al * h * h / 8, wa + al * h / 2),
+                      (ta + h / 2, pa + wa * h / 2 + al * h * h / 8, wa + al * h / 2),
+                      (ta + h, pa + wa * h + al * h * h / 2, wa + al * h)]
+            kq, kv = [], []
+            for i, (tt, pp, ww) in enumerate(stages):
+                c = (0.0, 0.5, 0.5, 1.0)[i]
+                qi = q + c * h * kq[-1] if i else q
+                vi = v + c * h * kv[-1] if i else v
+                kq.append(vi)
+                kv.append(accel(tt, pp, ww, al, qi, vi))
+            q = q + h / 6 * (kq[0] + 2 * kq[1] + 2 * kq[2] + kq[3])
+            v = v + h / 6 * (kv[0] + 2 * kv[1] + 2 * kv[2] + kv[3])
+        phi += 0.5 * (wk + omega[k + 1]) * dt
+        expected.append(q.copy())
+    Q, *_ = integrate(q0, v0, omega, 0.0, 0.0, dt, substeps, 0, s.minv, s.C, s.G, s.K, s.fg,
+                      unb, brg, s.kernel, s.kparams, 1.0)
+    expected = np.array(expected)
+    np.testing.assert_allclose(Q, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+    # the run moved: the comparison is not of the start state with itself
+    assert np.abs(expected[-1] - expected[0]).max() > 1e-3 * np.abs(expected).max()

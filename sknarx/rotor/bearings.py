@@ -20,10 +20,31 @@ __all__ = ["bearing_force", "bearing_force_py"]
 @njit(cache=True, nogil=True, inline="always")
 def bearing_force(x, y, phi, kB, gamma, expo, n_balls, cage_ratio):  # pragma: no cover
     """Force (fx, fy) in N on the journal at (x, y) m; ``phi`` is the shaft angle."""
+    c, s = cage_angle(phi, cage_ratio)
+    cs, ss = ball_pitch(n_balls)
+    return bearing_force_at(x, y, c, s, cs, ss, kB, gamma, expo, n_balls)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def cage_angle(phi, cage_ratio):  # pragma: no cover
+    """(cos, sin) of the first ball's angle, the cage's, at shaft angle ``phi``."""
     th0 = cage_ratio * phi
-    c, s = math.cos(th0), math.sin(th0)
+    return math.cos(th0), math.sin(th0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ball_pitch(n_balls):  # pragma: no cover
+    """(cos, sin) of the angle between neighbouring balls."""
     step = 2.0 * math.pi / n_balls
-    cs, ss = math.cos(step), math.sin(step)
+    return math.cos(step), math.sin(step)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def bearing_force_at(x, y, c, s, cs, ss, kB, gamma, expo, n_balls):  # pragma: no cover
+    """:func:`bearing_force` from the cage angle's (cos, sin) ``(c, s)`` and the ball
+    pitch's ``(cs, ss)``: an integrator computes the pitch once per run and the cage
+    angle once per shaft angle, shared by both bearings and by the RK-4 stages that
+    evaluate the same instant, and gets the same forces bit for bit."""
     fx = 0.0
     fy = 0.0
     for _ in range(n_balls):

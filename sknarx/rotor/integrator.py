@@ -21,24 +21,36 @@ import math
 import numpy as np
 from numba import njit
 
-from .bearings import bearing_force
+from .bearings import ball_pitch, bearing_force_at, cage_angle
 
 __all__ = ["integrate"]
 
 
 @njit(nogil=True, inline="always")
-def _accel(t, phi, w, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams,
+def _angles(phi, unb, brg, out):  # pragma: no cover
+    """The trigonometry of shaft angle ``phi`` that the forces need: each disk's
+    unbalance angle's (cos, sin) at 0-3 and the cage angle's at 4-5. RK-4's second and
+    third stages evaluate the same instant, so one call serves both."""
+    for d in range(2):
+        a = phi + unb[d, 1]
+        out[2 * d] = math.cos(a)
+        out[2 * d + 1] = math.sin(a)
+    out[4], out[5] = cage_angle(phi, brg[4])
+
+
+@njit(nogil=True, inline="always")
+def _accel(t, phi, w, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, pitch, trig, extra, eparams,
            f, acc):  # pragma: no cover
     n = q.shape[0]
     for i in range(n):
         f[i] = fg[i]
     # unbalance of the two disks: m e (w^2 cos + alpha sin, w^2 sin - alpha cos)
     for d in range(2):
-        me, ph, ix, iy = unb[d, 0], unb[d, 1], int(unb[d, 2]), int(unb[d, 3])
-        c, s = math.cos(phi + ph), math.sin(phi + ph)
+        me, ix, iy = unb[d, 0], int(unb[d, 2]), int(unb[d, 3])
+        c, s = trig[2 * d], trig[2 * d + 1]
         f[ix] += me * (w * w * c + al * s)
         f[iy] += me * (w * w * s - al * c)
-    expo, nb, cr = brg[2], int(brg[3]), brg[4]
+    expo, nb = brg[2], int(brg[3])
     for b in range(2):
         ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
         # bearing A's contact stiffness and clearance at 0, 1; bearing B's at 9, 10;
@@ -49,7 +61,8 @@ def _accel(t, phi, w, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams,
         if hx >= 0:  # the contact between journal and housing
             x -= q[hx]
             y -= q[hy]
-        fx, fy = bearing_force(x, y, phi, kB, gamma, expo, nb, cr)
+        fx, fy = bearing_force_at(x, y, trig[4], trig[5], pitch[0], pitch[1], kB, gamma,
+                                  expo, nb)
         f[ix] += fx
         f[iy] += fy
         if hx >= 0:  # and its reaction on the housing
@@ -111,6 +124,9 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
     Ct = np.ascontiguousarray(C.T)
     Gt = np.ascontiguousarray(G.T)
     Kt = np.ascontiguousarray(K.T)
+    pitch = np.empty(2)
+    pitch[0], pitch[1] = ball_pitch(int(brg[3]))
+    trig = np.empty(6)
     h = dt / substeps
     phi = phi0
     me1, ph1 = unb[0, 0], unb[0, 1]
@@ -144,25 +160,29 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
             pe = pa + wa * h + 0.5 * al * h * h
             for i in range(ndof):
                 k1q[i] = v[i]
-            _accel(ta, pa, wa, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams, f, k1v)
+            _angles(pa, unb, brg, trig)
+            _accel(ta, pa, wa, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, pitch, trig, extra,
+                   eparams, f, k1v)
             for i in range(ndof):
                 qt[i] = q[i] + 0.5 * h * k1q[i]
                 vt[i] = v[i] + 0.5 * h * k1v[i]
                 k2q[i] = vt[i]
-            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra,
-                   eparams, f, k2v)
+            _angles(pm, unb, brg, trig)
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, pitch,
+                   trig, extra, eparams, f, k2v)
             for i in range(ndof):
                 qt[i] = q[i] + 0.5 * h * k2q[i]
                 vt[i] = v[i] + 0.5 * h * k2v[i]
                 k3q[i] = vt[i]
-            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra,
-                   eparams, f, k3v)
+            _accel(ta + 0.5 * h, pm, wm, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, pitch,
+                   trig, extra, eparams, f, k3v)  # the same instant: the same angles
             for i in range(ndof):
                 qt[i] = q[i] + h * k3q[i]
                 vt[i] = v[i] + h * k3v[i]
                 k4q[i] = vt[i]
-            _accel(ta + h, pe, we, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, extra, eparams,
-                   f, k4v)
+            _angles(pe, unb, brg, trig)
+            _accel(ta + h, pe, we, al, qt, vt, minv, Ct, Gt, Kt, fg, unb, brg, pitch, trig,
+                   extra, eparams, f, k4v)
             for i in range(ndof):
                 q[i] += h / 6.0 * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
                 v[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i])
