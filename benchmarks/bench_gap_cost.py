@@ -2,7 +2,8 @@
 with nominal updating, on sweeps from each plant family.
 
 Run: ``python benchmarks/bench_gap_cost.py [--families own,second,ross] [--repeat N]
-[--kinds crack,none] [--peer-kinds crack] [--peer-families own] [--plant-retries 3]``
+[--kinds crack,none] [--seeds 21,22] [--peer-kinds crack] [--peer-families own]
+[--plant-retries 3]``
 (writes ``benchmarks/results/bench_gap_cost.json``, with each run's seed and phases:
 updating, nuisances, single candidates, the lead continued, pairs). A plant that fails
 on a trial's seed (ROSS's Newton iteration on a deep crack) is drawn again 100 seeds on,
@@ -40,6 +41,10 @@ def main():
     ap.add_argument("--families", default="own,second,ross")
     ap.add_argument("--kinds", default="crack,none,runout+crack",
                     help="withheld effects, comma-separated ('none', a name, a+b)")
+    ap.add_argument("--seeds", default=None,
+                    help="each kind's trial seed, comma-separated, one per kind (default: "
+                         "21 + the kind's position in --kinds, so a kind's sweep changes "
+                         "with the list it is in; name the seed to time one sweep alone)")
     ap.add_argument("--plant-retries", type=int, default=3,
                     help="where a family's plant fails on a trial's seed (ROSS's Newton "
                          "iteration on a deep crack), draw the seed 100 on, this many times")
@@ -51,6 +56,14 @@ def main():
     ap.add_argument("--peer-families", default="own",
                     help="families whose --peer-kinds sweeps the peer also diagnoses")
     args = ap.parse_args()
+    kinds = args.kinds.split(",")
+    try:
+        seeds = ([int(x) for x in args.seeds.split(",")] if args.seeds
+                 else [21 + i for i in range(len(kinds))])
+    except ValueError:
+        ap.error(f"--seeds must be whole numbers, got {args.seeds!r}")
+    if len(seeds) != len(kinds):
+        ap.error(f"--seeds gives {len(seeds)} seed(s) for {len(kinds)} kind(s)")
     # the trials' speed grid: 19 steps (the families read it at call time)
     families.SPEEDS = SPEEDS_19
     warm, *_ = families.make_family_trial("crack", 1, "own")
@@ -83,10 +96,10 @@ def main():
         return d, times, phases
 
     for fam in args.families.split(","):
-        for i, k in enumerate(args.kinds.split(",")):
+        for k, seed0 in zip(kinds, seeds, strict=True):
             kind = None if k == "none" else (tuple(k.split("+")) if "+" in k else k)
             measured, failures = None, []
-            for seed in range(21 + i, 21 + i + 100 * (args.plant_retries + 1), 100):
+            for seed in range(seed0, seed0 + 100 * (args.plant_retries + 1), 100):
                 try:
                     measured, truth, _, _ = families.make_family_trial(kind, seed, fam)
                     break
