@@ -16,6 +16,8 @@ scalar of non-synchronous energy cannot tell the two apart.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pandas as pd
 
@@ -73,23 +75,18 @@ def _spectral_plan(n, fs, omega):
 
 class _WindowPlan:
     """What the features of one window compute from its time axis and speed alone: the
-    harmonic basis and its pseudo-inverse, the Hann window, each periodogram bin's
-    band, and the rows' keys.
+    harmonic basis, the Hann window, each periodogram bin's band, and the rows' keys.
 
-    A calibration simulates the same speeds on the same time grid thousands of times.
-    Built once per grid, the order fit of a record is one small product with the
-    basis's pseudo-inverse instead of a basis and an SVD (``lstsq``) per record: the
-    features of one 1,000-sample, 6-channel window in 0.2 ms instead of 0.7 ms, the
-    same to rounding (``pinv`` and ``lstsq`` cut the singular values at the same
-    relative level).
+    A calibration simulates the same speeds on the same time grid thousands of times;
+    built once per grid, these take a third off the features of a record (one
+    1,000-sample, 6-channel window 0.65 -> 0.45 ms), and every number computed from
+    them is bit for bit the same.
     """
 
     def __init__(self, w, window, t, fs, orders, channels):
         labels = [ORDER_LABELS.get(k, f"{k:g}x") for k in orders]
         self.n_orders = len(orders)
         self.B = harmonic_basis(w * t, tuple(orders) + _EXTRA)
-        # singular values cut where lstsq(rcond=None) cuts them: eps * max(M, N)
-        self.B_pinv = np.linalg.pinv(self.B, rcond=np.finfo(float).eps * max(self.B.shape))
         self.hann, self.band = _spectral_plan(t.size, fs, w)
         # one row per channel: the orders' vectors, then the bands' line amplitudes
         self.keys = [(w, window, ch, lab) for ch in channels
@@ -98,6 +95,7 @@ class _WindowPlan:
 
 
 _PLANS: dict = {}
+_PLANS_LOCK = threading.Lock()  # the simulation threads extract features concurrently
 _MAX_PLANS = 64  # a 19-speed sweep's two windows need 38
 
 
@@ -106,9 +104,10 @@ def _window_plan(w, window, t, fs, orders, channels) -> _WindowPlan:
     plan = _PLANS.get(key)
     if plan is None:
         plan = _WindowPlan(w, window, t, fs, orders, channels)
-        if len(_PLANS) >= _MAX_PLANS:  # the oldest plan makes room (a dict keeps order)
-            _PLANS.pop(next(iter(_PLANS)), None)
-        _PLANS[key] = plan
+        with _PLANS_LOCK:
+            if len(_PLANS) >= _MAX_PLANS:  # the oldest plan makes room (dicts keep order)
+                _PLANS.pop(next(iter(_PLANS)), None)
+            _PLANS[key] = plan
     return plan
 
 
@@ -172,7 +171,9 @@ def _window_features(w, Y, fs, plan):
     """Order vectors, standard errors and line energies of one window (all channels),
     ``plan`` being its :class:`_WindowPlan`."""
     n, B = Y.shape[0], plan.B
-    coef = plan.B_pinv @ Y  # minimum-norm least squares, as lstsq (same singular cutoff)
+    # lstsq, not a cached pseudo-inverse: the product rounds differently, and at 1e-11
+    # the calibration's search already chose another basin in places (docs/gap.md, Cost)
+    coef, *_ = np.linalg.lstsq(B, Y, rcond=None)
     R = Y - B @ coef
     dof = max(n - B.shape[1], 1)
     se = np.sqrt((R**2).sum(axis=0) / dof) * np.sqrt(2.0 / n)
