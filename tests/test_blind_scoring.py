@@ -85,3 +85,30 @@ def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
     assert sc["top1_right_place"] == pytest.approx(1 / 3)
     assert sc["top1_right_place_decided"] == 1.0
     assert sc["n_place_undecided"] == 1
+
+
+def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_threshold(capsys):
+    """``benchmarks/rescore_gap_blind.py`` on the committed 25000 run: unchanged
+    thresholds give the committed report's scores; a lower pair trigger changes the
+    verdicts its analysis in docs/gap.md names; a search setting is refused."""
+    import json
+
+    import rescore_gap_blind as rescore
+
+    report = "results/bench_gap_blind_25000_f7de2a1.json"
+    committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
+    evals = rescore.load(["ross", "second"], "f7de2a1")
+    frozen = replace(DiagnosisSettings(), no_gap_per_feature=0.33)
+    for fam, recs in evals.items():
+        sc = blind.score(recs, frozen)
+        for key in rescore.COLUMNS:
+            assert sc[key] == pytest.approx(committed[fam]["scores"][key])
+    rescore.main(["--report", report, "--commit", "f7de2a1",
+                  "--what-if", "pair_trigger=0.33"])
+    out = capsys.readouterr().out
+    changed = {line.split()[1] for line in out.splitlines()
+               if line.startswith(("ross ", "second ")) and line.split()[1].isdigit()}
+    assert changed == {"25038", "25002", "25016", "25021"}
+    with pytest.raises(SystemExit) as exc:
+        rescore.main(["--report", report, "--commit", "f7de2a1", "--what-if", "max_nfev=3"])
+    assert exc.value.code == 2

@@ -1,0 +1,134 @@
+"""What a blind run's logged trials would score under other verdict thresholds.
+
+Run: ``python benchmarks/rescore_gap_blind.py --report results/bench_gap_blind_25000_f7de2a1.json
+--commit f7de2a1 --what-if pair_trigger=0.33`` (paths relative to ``benchmarks/``).
+
+The verdict is decided from the ranking after the search (:func:`sknarx.gap.core.decide`),
+so a logged trial can be decided again under other thresholds without running it. The
+thresholds start from the report's frozen ones; ``--what-if NAME=VALUE`` (repeatable)
+changes the named ones. Scores of both are printed side by side, with every trial whose
+verdict changes. This is analysis of a finished run, not an evaluation: thresholds
+chosen by looking at the evaluation trials are fitted on them, so a threshold change it
+suggests must be frozen and run on fresh seeds before its scores are claimed.
+
+Where the new thresholds would have made the *search* differ, the log cannot say what
+it would have found, and those trials are counted, not re-decided: the blind run
+searches pairs wherever the best single leaves more than its own ``pair_trigger``
+(0.2 per feature, the bench's search setting), so a what-if ``pair_trigger`` below that
+is refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import fields, replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, table  # noqa: E402
+from bench_gap_blind import score, truth_label, verdict  # noqa: E402
+
+from sknarx.gap import DiagnosisSettings  # noqa: E402
+
+#: the pair trigger of the blind run's search (bench_gap_blind.main's ``base``): pairs
+#: were fitted wherever the best single left more than this per feature
+SEARCH_PAIR_TRIGGER = 0.2
+#: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
+#: settings change what the search finds, which a log cannot replay
+DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "pair_trigger", "pair_gain",
+            "pair_margin")
+COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
+           "unexplained_out_of_library", "shrink_vs_oracle_median")
+
+
+def _value(text: str, like):
+    if like is None or isinstance(like, float):
+        return None if text == "None" else float(text)
+    if isinstance(like, bool):
+        return text.lower() in ("1", "true", "yes")
+    return type(like)(text)
+
+
+def load(families, commit):
+    """Each family's logged evaluation trials of ``commit`` (one per seed, the last
+    logged), with each pair member's visibility from the member-gap cache."""
+    cache_path = RESULTS / "gap_blind_member_gaps.json"
+    cache = json.loads(cache_path.read_text()) if cache_path.exists() else {}
+    out = {}
+    for fam in families:
+        by_seed = {}
+        for path in sorted(RESULTS.glob(f"gap_blind_eval_{fam}*.jsonl")):
+            for line in path.read_text().splitlines():
+                r = json.loads(line)
+                if str(r.get("commit", "")).startswith(commit) and "ranking" in r:
+                    by_seed[r["seed"]] = r
+        recs = []
+        for r in by_seed.values():
+            key = f"{r['family']}:{r['seed']}:{r['code']}"
+            if isinstance(r["kind"], list) and key in cache:
+                r = {**r, "member_gap": cache[key]}
+            recs.append(r)
+        out[fam] = sorted(recs, key=lambda r: r["seed"])
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--report", required=True,
+                    help="a bench_gap_blind JSON report: its frozen thresholds are the base")
+    ap.add_argument("--commit", required=True,
+                    help="the commit (prefix) whose logged evaluation trials to decide again")
+    ap.add_argument("--what-if", action="append", default=[], metavar="NAME=VALUE",
+                    help="a changed threshold (repeatable)")
+    ap.add_argument("--families", default="ross,second")
+    args = ap.parse_args(argv)
+    report = Path(args.report)
+    if not report.is_absolute():
+        report = Path(__file__).resolve().parent / report
+    try:
+        frozen_dict = json.loads(report.read_text())["thresholds"]
+    except (OSError, ValueError, KeyError) as exc:
+        ap.error(f"cannot read the thresholds of {report} ({exc}); give a "
+                 "bench_gap_blind JSON report")
+    known = {f.name for f in fields(DiagnosisSettings)}
+    frozen = DiagnosisSettings(**{k: v for k, v in frozen_dict.items() if k in known})
+    changes = {}
+    for item in args.what_if:
+        name, sep, text = item.partition("=")
+        if not sep or name not in DECISION:
+            ap.error(f"--what-if takes NAME=VALUE with NAME a decision threshold "
+                     f"({', '.join(DECISION)}); got {item!r}")
+        try:
+            changes[name] = _value(text, getattr(frozen, name))
+        except ValueError:
+            ap.error(f"--what-if {name}: {text!r} is not a value of its type")
+    if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
+        ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
+                 "search trigger): the log has no pairs to decide with")
+    other = replace(frozen, **changes)
+    evals = load(args.families.split(","), args.commit)
+    if not any(evals.values()):
+        ap.error(f"no logged evaluation trials of commit {args.commit!r} in {RESULTS}")
+    rows, changed = [], []
+    for fam, recs in evals.items():
+        for label, s in (("frozen", frozen), ("what-if", other)):
+            sc = score(recs, s)
+            rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
+        for r in recs:
+            a, b = verdict(r, frozen)[0], verdict(r, other)[0]
+            if a != b:
+                changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
+                                json.dumps(a), json.dumps(b)])
+    print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")
+    table(rows, ["family", "thresholds", "trials", *COLUMNS])
+    print()
+    if changed:
+        table(changed, ["family", "seed", "truth", "frozen verdict", "what-if verdict"])
+    else:
+        print("no verdict changes")
+
+
+if __name__ == "__main__":
+    main()
