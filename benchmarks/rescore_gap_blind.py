@@ -11,6 +11,12 @@ verdict changes. This is analysis of a finished run, not an evaluation: threshol
 chosen by looking at the evaluation trials are fitted on them, so a threshold change it
 suggests must be frozen and run on fresh seeds before its scores are claimed.
 
+With several ``--commit`` (comma-separated) the runs' trials are pooled: meaningful only
+where those commits' searches give the same answers bit for bit (a later commit that
+changed nothing the search computes), which the caller must know. Each rate is also
+printed as successes/trials with its Wilson 95 % interval: the sampling uncertainty of a
+rate on some thirty trials is about +-0.15.
+
 Where the new thresholds would have made the *search* differ, the log cannot say what
 it would have found, and those trials are counted, not re-decided: the blind run
 searches pairs wherever the best single leaves more than its own ``pair_trigger``
@@ -22,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import fields, replace
 from pathlib import Path
@@ -39,6 +46,10 @@ SEARCH_PAIR_TRIGGER = 0.2
 #: settings change what the search finds, which a log cannot replay
 DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "pair_trigger", "pair_gain",
             "pair_margin")
+#: each rate's denominator in :func:`bench_gap_blind.score`
+COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
+          "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
+          "unexplained_out_of_library": "n_out_of_library"}
 COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 
@@ -49,6 +60,16 @@ def _value(text: str, like):
     if isinstance(like, bool):
         return text.lower() in ("1", "true", "yes")
     return type(like)(text)
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a proportion ``k/n`` (95 % for ``z`` 1.96)."""
+    if n == 0:
+        return float("nan"), float("nan")
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(centre - half, 0.0), min(centre + half, 1.0)
 
 
 def load(families, commit):
@@ -62,7 +83,8 @@ def load(families, commit):
         for path in sorted(RESULTS.glob(f"gap_blind_eval_{fam}*.jsonl")):
             for line in path.read_text().splitlines():
                 r = json.loads(line)
-                if str(r.get("commit", "")).startswith(commit) and "ranking" in r:
+                if (any(str(r.get("commit", "")).startswith(c) for c in commit.split(","))
+                        and "ranking" in r):
                     by_seed[r["seed"]] = r
         recs = []
         for r in by_seed.values():
@@ -79,7 +101,8 @@ def main(argv=None):
     ap.add_argument("--report", required=True,
                     help="a bench_gap_blind JSON report: its frozen thresholds are the base")
     ap.add_argument("--commit", required=True,
-                    help="the commit (prefix) whose logged evaluation trials to decide again")
+                    help="the commit (prefix) whose logged evaluation trials to decide again; "
+                    "comma-separated to pool runs whose searches are bit for bit the same")
     ap.add_argument("--what-if", action="append", default=[], metavar="NAME=VALUE",
                     help="a changed threshold (repeatable)")
     ap.add_argument("--families", default="ross,second")
@@ -111,8 +134,14 @@ def main(argv=None):
     evals = load(args.families.split(","), args.commit)
     if not any(evals.values()):
         ap.error(f"no logged evaluation trials of commit {args.commit!r} in {RESULTS}")
-    rows, changed = [], []
+    rows, changed, counted = [], [], []
     for fam, recs in evals.items():
+        sc = score(recs, frozen)
+        for key, n_key in COUNTS.items():
+            n = int(sc[n_key])
+            k = int(round(sc[key] * n)) if n else 0
+            lo, hi = wilson(k, n)
+            counted.append([fam, key, f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"])
         for label, s in (("frozen", frozen), ("what-if", other)):
             sc = score(recs, s)
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
@@ -123,6 +152,8 @@ def main(argv=None):
                                 json.dumps(a), json.dumps(b)])
     print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")
     table(rows, ["family", "thresholds", "trials", *COLUMNS])
+    print()
+    table(counted, ["family", "rate (frozen)", "k/n", "rate", "95 % interval (Wilson)"])
     print()
     if changed:
         table(changed, ["family", "seed", "truth", "frozen verdict", "what-if verdict"])

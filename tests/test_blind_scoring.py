@@ -112,3 +112,16 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     with pytest.raises(SystemExit) as exc:
         rescore.main(["--report", report, "--commit", "f7de2a1", "--what-if", "max_nfev=3"])
     assert exc.value.code == 2
+
+
+def test_the_rates_interval_is_wilsons():
+    """Known values: 0 of n has the upper bound z^2 / (n + z^2); 5 of 10 is symmetric
+    about one half."""
+    import rescore_gap_blind as rescore
+
+    lo, hi = rescore.wilson(0, 11)
+    assert lo == pytest.approx(0.0, abs=1e-12) and hi == pytest.approx(1.96**2 / (11 + 1.96**2))
+    lo, hi = rescore.wilson(5, 10)
+    assert lo + hi == pytest.approx(1.0) and hi == pytest.approx(0.76341, abs=1e-5)
+    lo, hi = rescore.wilson(24, 30)
+    assert lo < 0.8 < hi and hi == pytest.approx(0.90495, abs=1e-5)
