@@ -17,11 +17,13 @@ changed nothing the search computes), which the caller must know. Each rate is a
 printed as successes/trials with its Wilson 95 % interval: the sampling uncertainty of a
 rate on some thirty trials is about +-0.15.
 
-Where the new thresholds would have made the *search* differ, the log cannot say what
-it would have found, and those trials are counted, not re-decided: the blind run
-searches pairs wherever the best single leaves more than its own ``pair_trigger``
-(0.2 per feature, the bench's search setting), so a what-if ``pair_trigger`` below that
-is refused.
+Only the decision thresholds can be changed: the others change what the search finds,
+which a log cannot replay. Of the decision thresholds only ``pair_trigger`` also acts in
+the search (pairs are fitted where the best single leaves more than it); the blind run
+searches with 0.2 per feature whatever it decides with, so any what-if trigger from 0.2
+up finds its pairs in the log, and one below is refused. A pair trial whose members'
+visibility (``gap_blind_member_gaps.json``) was not computed counts both members as
+visible, as the blind run's report does.
 """
 
 from __future__ import annotations
