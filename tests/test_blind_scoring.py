@@ -125,3 +125,30 @@ def test_the_rates_interval_is_wilsons():
     assert lo + hi == pytest.approx(1.0) and hi == pytest.approx(0.76341, abs=1e-5)
     lo, hi = rescore.wilson(24, 30)
     assert lo < 0.8 < hi and hi == pytest.approx(0.90495, abs=1e-5)
+
+
+def test_the_sub_floor_gate_names_only_what_beats_every_effect_free_trial():
+    """``benchmarks/bench_gap_subfloor.py``: the gate's thresholds are the effect-free
+    trials' largest best-single shrink and log shrink; below the floor a best single
+    beyond both is the verdict, one short of either is not, and a trial above the floor
+    is decided as the package decides it."""
+    import bench_gap_subfloor as sub
+
+    free = [_record("none", {}, [("clearance", 0.10, 0.05, 0.1, {}),
+                                 ("rub", 0.2, 0.3, 0.1, {})], e0=0.2, effect_gap=0.0),
+            _record("none", {}, [("looseness", 0.02, 0.12, 0.1, {})], e0=0.1,
+                    effect_gap=0.0)]
+    gate = sub.fit_gate(free)
+    assert gate == {"shrink": 0.10, "log_shrink": 0.12, "n_free": 2}
+    aniso = {"anisotropy": {"soft": 1.6e7, "soft_axis": "y"}}
+    hidden = _record("anisotropy", aniso, [("anisotropy", 0.3, 0.2, 0.15, {})], e0=0.24)
+    short = _record("anisotropy", aniso, [("anisotropy", 0.3, 0.1, 0.15, {})], e0=0.24)
+    above = _record("anisotropy", aniso, [("anisotropy", 0.3, 0.2, 0.5, {})], e0=0.7)
+    recs = [sub.gated(r, S, gate) for r in (hidden, short, above, *free)]
+    assert [bool(r.get("_gate")) for r in recs] == [True, False, False, False, False]
+    with sub.gate_applied():
+        got = [blind.verdict(r, S)[0] for r in recs]
+        sc = blind.score(recs, S)
+    assert got == ["anisotropy", "no-gap", "unexplained", "no-gap", "no-gap"]
+    assert sc["top1"] == pytest.approx(1 / 3) and sc["false_alarm"] == 0.0
+    assert blind.verdict(recs[0], S)[0] == "no-gap"  # the package's own decision again
