@@ -35,7 +35,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
 from bench_gap_blind import run, score, truth_label, verdict  # noqa: E402
-from rescore_gap_blind import COUNTS, load, wilson  # noqa: E402
+from rescore_gap_blind import COUNTS, intervals, load  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -111,9 +111,13 @@ def main():
     report = Path(args.report)
     if not report.is_absolute():
         report = Path(__file__).resolve().parent / report
+    try:
+        thresholds = json.loads(report.read_text())["thresholds"]
+    except (OSError, ValueError, KeyError) as exc:
+        ap.error(f"cannot read the thresholds of {report} ({exc}); give the evaluated "
+                 "run's bench_gap_blind JSON report")
     known = {f.name for f in fields(DiagnosisSettings)}
-    frozen = DiagnosisSettings(**{k: v for k, v in json.loads(report.read_text())[
-        "thresholds"].items() if k in known})
+    frozen = DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
     evals = load(args.families.split(","), args.evaluate)
     rows, counted, changed, out = [], [], [], {}
     for fam, recs in evals.items():
@@ -125,11 +129,8 @@ def main():
         out[fam] = {"package": plain, "gated": with_gate}
         for label, sc in (("package", plain), ("with the gate", with_gate)):
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COUNTS])
-            for key, n_key in COUNTS.items():
-                n = int(sc[n_key])
-                k = int(round(sc[key] * n)) if n else 0
-                lo, hi = wilson(k, n)
-                counted.append([fam, label, key, f"{k}/{n}", f"{lo:.2f}-{hi:.2f}"])
+            counted += [[fam, label, key, f"{k}/{n}", f"{lo:.2f}-{hi:.2f}"]
+                        for key, k, n, lo, hi in intervals(sc)]
         for r, b in zip(recs, after, strict=True):
             a = verdict(r, frozen)[0]
             if a != b:

@@ -74,6 +74,17 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return max(centre - half, 0.0), min(centre + half, 1.0)
 
 
+def intervals(sc):
+    """Each rate of a :func:`bench_gap_blind.score` result as ``(name, k, n, lo, hi)``:
+    successes, trials and the Wilson 95 % interval."""
+    out = []
+    for key, n_key in COUNTS.items():
+        n = int(sc[n_key])
+        k = int(round(sc[key] * n)) if n else 0
+        out.append((key, k, n, *wilson(k, n)))
+    return out
+
+
 def load(families, commit):
     """Each family's logged evaluation trials of ``commit`` (one per seed, the last
     logged), with each pair member's visibility from the member-gap cache."""
@@ -139,11 +150,8 @@ def main(argv=None):
     rows, changed, counted = [], [], []
     for fam, recs in evals.items():
         sc = score(recs, frozen)
-        for key, n_key in COUNTS.items():
-            n = int(sc[n_key])
-            k = int(round(sc[key] * n)) if n else 0
-            lo, hi = wilson(k, n)
-            counted.append([fam, key, f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"])
+        counted += [[fam, key, f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"]
+                    for key, k, n, lo, hi in intervals(sc)]
         for label, s in (("frozen", frozen), ("what-if", other)):
             sc = score(recs, s)
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
