@@ -29,13 +29,13 @@ import argparse
 import json
 import sys
 from contextlib import contextmanager
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
 from bench_gap_blind import run, score, truth_label, verdict  # noqa: E402
-from rescore_gap_blind import COUNTS, intervals, load  # noqa: E402
+from rescore_gap_blind import COUNTS, frozen_thresholds, intervals, load  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -108,16 +108,7 @@ def main():
           f"{gate['shrink']:.3f} and log shrink > {gate['log_shrink']:.3f}")
     if not args.evaluate:
         return
-    report = Path(args.report)
-    if not report.is_absolute():
-        report = Path(__file__).resolve().parent / report
-    try:
-        thresholds = json.loads(report.read_text())["thresholds"]
-    except (OSError, ValueError, KeyError) as exc:
-        ap.error(f"cannot read the thresholds of {report} ({exc}); give the evaluated "
-                 "run's bench_gap_blind JSON report")
-    known = {f.name for f in fields(DiagnosisSettings)}
-    frozen = DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
+    frozen = frozen_thresholds(args.report, ap)
     evals = load(args.families.split(","), args.evaluate)
     rows, counted, changed, out = [], [], [], {}
     for fam, recs in evals.items():

@@ -56,12 +56,9 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 
 
-def _value(text: str, like):
-    if like is None or isinstance(like, float):
-        return None if text == "None" else float(text)
-    if isinstance(like, bool):
-        return text.lower() in ("1", "true", "yes")
-    return type(like)(text)
+def _value(text: str):
+    """A decision threshold's value: every one is a float, ``pair_margin`` also None."""
+    return None if text == "None" else float(text)
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -83,6 +80,21 @@ def intervals(sc):
         k = int(round(sc[key] * n)) if n else 0
         out.append((key, k, n, *wilson(k, n)))
     return out
+
+
+def frozen_thresholds(path, ap):
+    """The frozen thresholds of a ``bench_gap_blind`` JSON report (``path`` relative to
+    ``benchmarks/`` unless absolute); an unreadable report is ``ap``'s error line."""
+    report = Path(path)
+    if not report.is_absolute():
+        report = Path(__file__).resolve().parent / report
+    try:
+        thresholds = json.loads(report.read_text())["thresholds"]
+    except (OSError, ValueError, KeyError) as exc:
+        ap.error(f"cannot read the thresholds of {report} ({exc}); give a "
+                 "bench_gap_blind JSON report")
+    known = {f.name for f in fields(DiagnosisSettings)}
+    return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
 
 
 def load(families, commit):
@@ -120,16 +132,7 @@ def main(argv=None):
                     help="a changed threshold (repeatable)")
     ap.add_argument("--families", default="ross,second")
     args = ap.parse_args(argv)
-    report = Path(args.report)
-    if not report.is_absolute():
-        report = Path(__file__).resolve().parent / report
-    try:
-        frozen_dict = json.loads(report.read_text())["thresholds"]
-    except (OSError, ValueError, KeyError) as exc:
-        ap.error(f"cannot read the thresholds of {report} ({exc}); give a "
-                 "bench_gap_blind JSON report")
-    known = {f.name for f in fields(DiagnosisSettings)}
-    frozen = DiagnosisSettings(**{k: v for k, v in frozen_dict.items() if k in known})
+    frozen = frozen_thresholds(args.report, ap)
     changes = {}
     for item in args.what_if:
         name, sep, text = item.partition("=")
@@ -137,9 +140,9 @@ def main(argv=None):
             ap.error(f"--what-if takes NAME=VALUE with NAME a decision threshold "
                      f"({', '.join(DECISION)}); got {item!r}")
         try:
-            changes[name] = _value(text, getattr(frozen, name))
+            changes[name] = _value(text)
         except ValueError:
-            ap.error(f"--what-if {name}: {text!r} is not a value of its type")
+            ap.error(f"--what-if {name}: {text!r} is not a number (or None for pair_margin)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
