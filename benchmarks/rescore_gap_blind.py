@@ -46,8 +46,8 @@ from sknarx.gap import DiagnosisSettings  # noqa: E402
 SEARCH_PAIR_TRIGGER = 0.2
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
-DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "pair_trigger", "pair_gain",
-            "pair_margin")
+DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "breadth_waived_at_floor",
+            "pair_trigger", "pair_gain", "pair_margin")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -56,8 +56,13 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 
 
-def _value(text: str):
-    """A decision threshold's value: every one is a float, ``pair_margin`` also None."""
+def _value(name: str, text: str):
+    """A decision setting's value: a float (``pair_margin`` also None), the one switch
+    ``breadth_waived_at_floor`` True or False."""
+    if name == "breadth_waived_at_floor":
+        if text not in ("True", "False"):
+            raise ValueError(text)
+        return text == "True"
     return None if text == "None" else float(text)
 
 
@@ -94,6 +99,8 @@ def frozen_thresholds(path, ap):
         ap.error(f"cannot read the thresholds of {report} ({exc}); give a "
                  "bench_gap_blind JSON report")
     known = {f.name for f in fields(DiagnosisSettings)}
+    # a report written before the breadth waiver existed was decided without it
+    thresholds.setdefault("breadth_waived_at_floor", False)
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
 
 
@@ -140,9 +147,10 @@ def main(argv=None):
             ap.error(f"--what-if takes NAME=VALUE with NAME a decision threshold "
                      f"({', '.join(DECISION)}); got {item!r}")
         try:
-            changes[name] = _value(text)
+            changes[name] = _value(name, text)
         except ValueError:
-            ap.error(f"--what-if {name}: {text!r} is not a number (or None for pair_margin)")
+            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin, "
+                     "True or False for breadth_waived_at_floor)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")

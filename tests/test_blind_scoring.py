@@ -98,7 +98,9 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     report = "results/bench_gap_blind_25000_f7de2a1.json"
     committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
     evals = rescore.load(["ross", "second"], "f7de2a1")
-    frozen = replace(DiagnosisSettings(), no_gap_per_feature=0.33)
+    # the run was decided before the breadth waiver existed
+    frozen = replace(DiagnosisSettings(), no_gap_per_feature=0.33,
+                     breadth_waived_at_floor=False)
     for fam, recs in evals.items():
         sc = blind.score(recs, frozen)
         for key in rescore.COLUMNS:
@@ -111,6 +113,26 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     assert changed == {"25038", "25002", "25016", "25021"}
     with pytest.raises(SystemExit) as exc:
         rescore.main(["--report", report, "--commit", "f7de2a1", "--what-if", "max_nfev=3"])
+    assert exc.value.code == 2
+
+
+def test_the_breadth_waiver_decided_again_on_a_logged_run(capsys):
+    """The breadth waiver (``breadth_waived_at_floor``) on the 16000 run's logs, decided
+    before it existed: it names the one trial docs/gap.md names (the second plant's
+    misalignment 16020, left below the floor by a misalignment with log shrink 0.26);
+    a value that is not True or False is one argparse error."""
+    import rescore_gap_blind as rescore
+
+    report = "results/bench_gap_blind_25000_f7de2a1.json"
+    rescore.main(["--report", report, "--commit", "9d7bd56",
+                  "--what-if", "breadth_waived_at_floor=True"])
+    lines = capsys.readouterr().out.splitlines()
+    changed = [line.split() for line in lines
+               if line.startswith(("ross ", "second ")) and line.split()[1].isdigit()]
+    assert [(c[0], c[1], c[-1]) for c in changed] == [("second", "16020", '"misalignment"')]
+    with pytest.raises(SystemExit) as exc:
+        rescore.main(["--report", report, "--commit", "9d7bd56",
+                      "--what-if", "breadth_waived_at_floor=yes"])
     assert exc.value.code == 2
 
 

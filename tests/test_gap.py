@@ -333,11 +333,47 @@ def test_verdict_needs_breadth_as_well_as_shrink():
     from sknarx.gap.core import decide
 
     s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5)
-    broad = _entry(["crack"], 10.0, 0.95, 0.9)
-    narrow = _entry(["clearance"], 10.0, 0.95, -0.3)  # matches the big features only
-    assert decide(5.0, [broad], s, 100)["effect"] == "crack"
-    assert decide(5.0, [narrow], s, 100) is None
+    broad = _entry(["crack"], 100.0, 0.95, 0.9)
+    # matches the big features only and leaves 1 per feature, twice the floor
+    narrow = _entry(["clearance"], 100.0, 0.95, -0.3)
+    assert decide(20.0, [broad], s, 100)["effect"] == "crack"
+    assert decide(20.0, [narrow], s, 100) is None
     assert decide(0.4, [broad], s, 100) == "no-gap"
+
+
+def test_a_candidate_that_leaves_no_more_than_the_floor_needs_no_breadth():
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5)
+    # a thin model-form residual left untouched holds the log share down to 0.2, but
+    # what is left (0.3 per feature) is below the floor: nothing is left to explain
+    thin = _entry(["misalignment"], 30.0, 0.85, 0.2)
+    assert decide(2.0, [thin], s, 100)["effect"] == "misalignment"
+    # the same shares leaving 0.6 per feature, above the floor: the check stands
+    assert decide(4.0, [_entry(["misalignment"], 60.0, 0.85, 0.2)], s, 100) is None
+    # the waiver is not a license to remove less than min_shrink
+    assert decide(2.0, [_entry(["misalignment"], 30.0, 0.65, 0.2)], s, 100) is None
+    assert decide(2.0, [thin], replace(s, breadth_waived_at_floor=False), 100) is None
+
+
+@given(e0=st.floats(0.01, 100.0), left=st.floats(0.0, 1.0), log_share=st.floats(-2.0, 1.0),
+       floor=st.floats(0.05, 1.0))
+def test_the_breadth_waiver_only_adds_verdicts_that_leave_the_floor(e0, left, log_share,
+                                                                   floor):
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide
+
+    n = 100
+    entry = _entry(["rub"], left * e0 * n, 1.0 - left, log_share)
+    s = DiagnosisSettings(no_gap_per_feature=floor, min_shrink=0.6, min_log_shrink=0.3)
+    with_waiver = decide(e0, [entry], s, n)
+    without = decide(e0, [entry], replace(s, breadth_waived_at_floor=False), n)
+    if without is not None:
+        assert with_waiver is without  # everything accepted before still is
+    elif with_waiver not in (None, "no-gap"):
+        # a verdict only the waiver admits removed min_shrink and left at most the floor
+        assert entry["shrink"] >= 0.6 and left * e0 <= floor
 
 
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():

@@ -232,16 +232,23 @@ def decide(e0: float, ranking: list, settings, n_features: int):
     excess *and* ``min_log_shrink`` of its logarithm: the excess is dominated by the
     few largest features, and an effect that matches them while breaking many
     others (a bearing rattling broadband to mimic an electrical line, say) must
-    not pass. Which candidate is judged: :func:`preferred`.
+    not pass. The breadth check is waived (``breadth_waived_at_floor``) for a
+    candidate that leaves no more than ``no_gap_per_feature``: the test that calls
+    a sweep effect-free before any candidate then finds nothing left, whatever it broke
+    or left untouched on the way -- on a rotor its model does not describe exactly,
+    the model-form residual spread thinly over many features is what holds the
+    logarithm's share down, and no effect removes that. Which candidate is judged:
+    :func:`preferred`.
     """
     if e0 <= settings.no_gap_per_feature:
         return "no-gap"
     choice = preferred(ranking, settings, n_features)
     if choice is None:
         return None
-    ok = (choice["shrink"] >= settings.min_shrink
-          and choice["log_shrink"] >= settings.min_log_shrink)
-    return choice if ok else None
+    left = choice["heldout_gap_after"] / max(n_features, 1)
+    broad = (choice["log_shrink"] >= settings.min_log_shrink
+             or (settings.breadth_waived_at_floor and left <= settings.no_gap_per_feature))
+    return choice if choice["shrink"] >= settings.min_shrink and broad else None
 
 
 class FrontEnd:

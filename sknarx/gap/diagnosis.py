@@ -20,7 +20,8 @@ search, ranking, verdict and shrink are the gap core's (:mod:`sknarx.gap.core`):
    the best single if it removes most of what the single left.
 5. The verdict is the best single effect or pair if it removes at least
    ``min_shrink`` of the held-out gap and ``min_log_shrink`` of its logarithm
-   (a breadth check: see :func:`sknarx.gap.core.decide`), else ``unexplained``.
+   (a breadth check, waived where it leaves no more than the no-gap floor: see
+   :func:`sknarx.gap.core.decide`), else ``unexplained``.
 
 Thresholds are fixed on pilot trials of ``benchmarks/bench_gap_blind.py`` and
 then frozen (see ``DiagnosisSettings``).

@@ -29,6 +29,10 @@ class DiagnosisSettings:
     no_gap_per_feature: float = 0.300  # mean held-out excess per feature below which: no-gap
     min_shrink: float = 0.6  # a verdict must remove at least this share of the gap
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
+    # ... unless it leaves no more than no_gap_per_feature: what is left then cannot be
+    # told from an effect-free sweep, so the breadth check has nothing to guard
+    # (sknarx.gap.core.decide; docs/gap.md, *Verdict*)
+    breadth_waived_at_floor: bool = True
     pair_trigger: float = 0.5  # try pairs when the best single leaves this excess per feature
     pair_gain: float = 0.3  # a pair must remove this share of what the best single leaves
     # ... and score (AIC: held-out excess + 2 per parameter) this much below it; None: the
