@@ -92,6 +92,47 @@ def static_deformations():
     return {"second": second, "sknarx": own}
 
 
+def modes(speeds):
+    """Frequencies (rad/s) of each rotor's oscillatory modes below 1,000 rad/s at
+    ``speeds``: sknarx's linearised rotor (with damping ratio and whirl), and the second
+    plant's own linear matrices with its journals grounded by the stiffness sknarx's
+    linearisation gives its bearings (a crude stand-in: the second plant's bearings are
+    only in its nonlinear kernel, and its housings are left on their pedestals)."""
+    import plants.second_derivation as sd
+    import scipy.linalg as sla
+
+    p = RotorParameters()
+    sim = RotorBearingSimulator(p)
+    lm = sim.linear_model()
+    idx = {n: i for i, n in enumerate(sim.dof_names)}
+    r2 = sd.SecondRotor()
+    M, C, K, G, _ = r2.matrices()
+    K = K.copy()
+    for name in ("xA", "yA", "xB", "yB"):
+        i = idx[name]
+        # the journal's diagonal less its segment's spring: the linearised bearing
+        bearing = lm.K[i, i] - (p.k1 if name.endswith("A") else p.k2)
+        K[getattr(sd, name.upper()), getattr(sd, name.upper())] += bearing
+    out = {"sknarx": {}, "second_crude": {}}
+    n = M.shape[0]
+    for w in speeds:
+        m = lm.modes(w)
+        m = m[m["frequency"] < 1000.0]
+        out["sknarx"][w] = [{"frequency_rad_s": float(f), "damping_ratio": float(z),
+                             "whirl": str(wh)}
+                            for f, z, wh in zip(m["frequency"], m["damping_ratio"],
+                                                m["whirl"], strict=True)]
+        A = np.block([[np.zeros((n, n)), np.eye(n)],
+                      [-np.linalg.solve(M, K), -np.linalg.solve(M, C + w * G)]])
+        lam = sla.eigvals(A)
+        lam = lam[lam.imag > 1e-6]
+        keep = np.abs(lam.imag) < 1000.0
+        out["second_crude"][w] = [{"frequency_rad_s": float(abs(v.imag)),
+                                   "damping_ratio": float(-v.real / abs(v))}
+                                  for v in sorted(lam[keep], key=lambda v: v.imag)]
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--speeds", type=float, nargs="+", default=[120.0, 200.0, 260.0],
@@ -120,12 +161,20 @@ def main(argv=None):
     for r in sorted(rows, key=lambda r: (r["speed_rad_s"], r["order"], r["station"])):
         print(f"{r['speed_rad_s']:6.1f} {r['order']:5d} {r['station']:>7s} {r['plant']:>7s} "
               + " ".join(f"{r['amplitude_um'][c]:7.3f}" for c in CHANNELS))
+    md = modes(args.speeds)
+    for w in args.speeds:
+        print(f"modes at {w:.0f} rad/s, sknarx:",
+              ", ".join(f"{m['frequency_rad_s']:.0f} ({m['damping_ratio']:.3f}, {m['whirl']})"
+                        for m in md["sknarx"][w]))
+        print(f"modes at {w:.0f} rad/s, second (crude):",
+              ", ".join(f"{m['frequency_rad_s']:.0f} ({m['damping_ratio']:.3f})"
+                        for m in md["second_crude"][w]))
     static = static_deformations()
     print("static y-deformation of the cracked segment, um:",
           {p: {k: round(v * 1e6, 1) for k, v in d.items()} for p, d in static.items()})
     write_json("bench_crack_station_form",
                {"depth": args.depth, "opening_rad": args.opening, "rows": rows,
-                "static_deformation_m": static})
+                "static_deformation_m": static, "modes": md})
 
 
 if __name__ == "__main__":
