@@ -18,7 +18,8 @@ the slope ``dy/dz = -tx``; both planes share one 6x6 *plane model* over
   lateral displacement of each disk and its bearing (shaft bending damping; the
   share ``frame_share_d1``, ``frame_share_d2`` of each from the disk to ground),
   ``c_O1 + c_O2`` on the relative lateral displacement of the two disks (the
-  bolted joint's interface damping);
+  bolted joint's interface damping; the share ``tilt_share_O`` of each on its disk's
+  tilt to ground instead);
 * gyroscopic moments ``J_polar * Omega`` couple the tilts of each disk.
 
 Every element is written as ``stiffness * v v^T`` over a deformation vector ``v``,
@@ -85,8 +86,12 @@ def plane_matrices(p: RotorParameters):
     C += _rank1([0, 0, 0, -1, 0, 1], p.c_d2 * (1.0 - s2))
     C[1, 1] += p.c_d1 * s1
     C[3, 3] += p.c_d2 * s2
-    # the bolted joint's interface damping, one share per disk face
-    C += _rank1([0, -1, 0, 1, 0, 0], p.c_O1 + p.c_O2)
+    # the bolted joint's interface damping, one share per disk face, but for the share
+    # read as damping of each disk's tilt (N m s/rad) to the frame
+    t = p.tilt_share_O
+    C += _rank1([0, -1, 0, 1, 0, 0], (p.c_O1 + p.c_O2) * (1.0 - t))
+    C[2, 2] += p.c_O1 * t
+    C[4, 4] += p.c_O2 * t
     C[0, 0] += p.c_a
     C[5, 5] += p.c_b
     M = np.diag([p.m_A, p.m_O1, p.J_diam1, p.m_O2, p.J_diam2, p.m_B])

@@ -83,6 +83,13 @@ class RotorParameters:
         damper at the disk (external damping, as a second derivation and the ROSS
         model read it). Where it acts moves the journals' 1x phase by tens of
         per cent, so model updating fits it.
+    tilt_share_O : float
+        Share (0-1) of ``c_O1`` (``c_O2``) acting on disk O1's (O2's) tilt to the frame,
+        read there as N m s/rad, rather than on the joint (0). The paper's "damping
+        introduced by the rotation of the disks" can be read either way
+        (``docs/rotor_model.md``); the second derivation of the gap benchmark reads it
+        on the tilts, which damps out the disks' tilting pair that this reading leaves
+        at 0.2-0.8 % -- the pair a crack's 2x and 3x excite.
     n_balls : int
         Number of balls Nb (8).
     R_outer, r_inner : float
@@ -131,6 +138,7 @@ class RotorParameters:
     e_O2: float | None = None
     frame_share_d1: float = 0.0
     frame_share_d2: float = 0.0
+    tilt_share_O: float = 0.0
 
     def __post_init__(self):
         self.validate()
@@ -159,7 +167,7 @@ class RotorParameters:
                 problems.append(f"{name}={v!r} must be None (same as "
                                 f"{_SHARED[name]}) or a finite "
                                 f"{'positive number' if positive_only else 'value >= 0'}")
-        for name in ("frame_share_d1", "frame_share_d2"):
+        for name in ("frame_share_d1", "frame_share_d2", "tilt_share_O"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
                 problems.append(f"{name}={v!r} must be a share between 0 and 1")

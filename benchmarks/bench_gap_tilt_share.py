@@ -1,0 +1,110 @@
+"""Logged blind trials diagnosed again with the disks' tilt damping free in the update.
+
+The independent second plant reads the paper's ``c_O1``, ``c_O2`` as damping of the
+disks' tilt; sknarx's rotor puts them on the joint, which leaves the disks' tilting
+pair at 0.2-0.8 % damping, and a crack's 2x and 3x answer differently on the two
+(``bench_crack_station_form.py``). ``RotorParameters.tilt_share_O`` reads a share of
+them on the tilts. The package's nominal update does not fit it; this re-runs logged
+trials with it added to the updated parameters (prior +-0.5 about 0, bounds 0-1, as the
+disk dampers' ``frame_share_d1``, ``frame_share_d2``) and prints the verdict, the crack's
+place and the gap beside the log's. An experiment: nothing here changes the package.
+
+    python benchmarks/bench_gap_tilt_share.py second:27038 second:27049
+
+Writes ``results/gap_tilt_share.jsonl`` (a trial there is not run again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_gap_blind as blind  # noqa: E402
+import rescore_gap_blind as rescore  # noqa: E402
+
+import sknarx.gap.diagnosis as diagnosis  # noqa: E402
+from sknarx.gap import DiagnosisSettings  # noqa: E402
+from sknarx.gap.updating import DEFAULT_PARAMETERS, UpdatingParameter  # noqa: E402
+
+LOG = blind.RESULTS / "gap_tilt_share.jsonl"
+TILT = UpdatingParameter("tilt_share_O", 0.5, log=False, bounds=(0.0, 1.0), unit="",
+                         label="share of c_O1, c_O2 acting on the disks' tilt")
+REPORT = "results/bench_gap_blind_27000_4a216b5.json"
+
+
+def _summary(rec, s):
+    v = blind.verdict(rec, s)[0]
+    c = blind.chosen(rec, s)
+    place = None
+    if isinstance(c, dict):
+        params = c["params"] if isinstance(c["params"], list) else [c["params"]]
+        place = next((p.get("station") or p.get("at") for p in params
+                      if isinstance(p, dict) and (p.get("station") or p.get("at"))), None)
+    return {"verdict": v, "place": place, "e0": rec["e0"],
+            "best": rec["ranking"][0]["effect"] if rec["ranking"] else None,
+            "best_shrink": rec["ranking"][0]["shrink"] if rec["ranking"] else None}
+
+
+def run(family, seed):
+    logged = None
+    for path in sorted(blind.RESULTS.glob(f"gap_blind_eval_{family}*.jsonl")):
+        for line in path.read_text().splitlines():
+            r = json.loads(line)
+            if r["seed"] == seed and "skipped" not in r and r.get("commit", "").startswith(
+                    ("4a216b5", "f7de2a1")):
+                logged = r
+    if logged is None:
+        raise SystemExit(f"bench_gap_tilt_share: no logged 25000/27000 evaluation trial "
+                         f"{family}:{seed}")
+    update = diagnosis.update_nominal_model
+    diagnosis.update_nominal_model = functools.partial(
+        update, parameters=DEFAULT_PARAMETERS + (TILT,))
+    try:
+        t = time.perf_counter()
+        rec = blind.run_trial(logged["kind"], seed, family,
+                              replace(DiagnosisSettings(), pair_trigger=0.2))
+    finally:
+        diagnosis.update_nominal_model = update
+    rec["seconds_total"] = time.perf_counter() - t
+    rec["commit"] = blind.git_commit()
+    return {"family": family, "seed": seed, "kind": logged["kind"], "logged": logged,
+            "tilt": rec}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("trials", nargs="+", metavar="FAMILY:SEED")
+    args = ap.parse_args(argv)
+    s = rescore.frozen_thresholds(REPORT, ap)
+    s = replace(s, breadth_waived_at_floor=True)
+    done = {}
+    if LOG.exists():
+        for line in LOG.read_text().splitlines():
+            r = json.loads(line)
+            done[(r["family"], r["seed"])] = r
+    for item in args.trials:
+        family, sep, seed = item.partition(":")
+        if not sep or not seed.isdigit() or family not in blind.FAMILIES:
+            ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(blind.FAMILIES)}; "
+                     f"got {item!r}")
+        key = (family, int(seed))
+        if key not in done:
+            done[key] = run(*key)
+            with LOG.open("a") as f:
+                f.write(json.dumps(done[key], default=float) + "\n")
+        r = done[key]
+        share = r["tilt"]["nominal_update"]["changes"].get("tilt_share_O")
+        print(f"{family} {seed} {json.dumps(r['kind'])}:")
+        print(f"  as logged:       {_summary(r['logged'], s)}")
+        print(f"  tilt share free: {_summary(r['tilt'], s)} (tilt_share_O "
+              f"{'-' if share is None else f'{share:+.2f}'})")
+
+
+if __name__ == "__main__":
+    main()
