@@ -65,3 +65,27 @@ def write_json(name, payload):
     path.write_text(json.dumps(payload, indent=1, default=float))
     print(f"\nwrote {path}")
     return path
+
+
+def rerun_trials(ap, items, families, log, run):
+    """Yield the records of ``FAMILY:SEED`` ``items`` in turn, each from the JSON-lines
+    ``log`` if it is there, else ``run(family, seed)``'s, appended to it first: a re-run
+    of logged trials that resumes. A malformed item is ``ap``'s error before any run."""
+    keys = []
+    for item in items:
+        family, sep, seed = item.partition(":")
+        if not sep or not seed.isdigit() or family not in families:
+            ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(families)}; "
+                     f"got {item!r}")
+        keys.append((family, int(seed)))
+    done = {}
+    if log.exists():
+        for line in log.read_text().splitlines():
+            r = json.loads(line)
+            done[(r["family"], r["seed"])] = r
+    for key in keys:
+        if key not in done:
+            done[key] = run(*key)
+            with log.open("a") as f:
+                f.write(json.dumps(done[key], default=float) + "\n")
+        yield done[key]

@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_gap_blind as blind  # noqa: E402
+from _common import rerun_trials  # noqa: E402
 
 import sknarx.gap.core as core  # noqa: E402
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -116,22 +117,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("trials", nargs="+", metavar="FAMILY:SEED")
     args = ap.parse_args(argv)
-    done = {}
-    if LOG.exists():
-        for line in LOG.read_text().splitlines():
-            r = json.loads(line)
-            done[(r["family"], r["seed"])] = r
-    for item in args.trials:
-        family, sep, seed = item.partition(":")
-        if not sep or not seed.isdigit() or family not in blind.FAMILIES:
-            ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(blind.FAMILIES)}; "
-                     f"got {item!r}")
-        key = (family, int(seed))
-        if key not in done:
-            done[key] = run(*key)
-            with LOG.open("a") as f:
-                f.write(json.dumps(done[key], default=float) + "\n")
-        show(done[key])
+    for rec in rerun_trials(ap, args.trials, blind.FAMILIES, LOG, run):
+        show(rec)
 
 
 if __name__ == "__main__":

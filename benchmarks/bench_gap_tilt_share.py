@@ -28,6 +28,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_gap_blind as blind  # noqa: E402
 import rescore_gap_blind as rescore  # noqa: E402
+from _common import rerun_trials  # noqa: E402
 
 import sknarx.gap.diagnosis as diagnosis  # noqa: E402
 from sknarx.gap import DiagnosisSettings  # noqa: E402
@@ -87,22 +88,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     s = rescore.frozen_thresholds(REPORT, ap)
     s = replace(s, breadth_waived_at_floor=True)
-    done = {}
-    if LOG.exists():
-        for line in LOG.read_text().splitlines():
-            r = json.loads(line)
-            done[(r["family"], r["seed"])] = r
-    for item in args.trials:
-        family, sep, seed = item.partition(":")
-        if not sep or not seed.isdigit() or family not in blind.FAMILIES:
-            ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(blind.FAMILIES)}; "
-                     f"got {item!r}")
-        key = (family, int(seed))
-        if key not in done:
-            done[key] = run(*key)
-            with LOG.open("a") as f:
-                f.write(json.dumps(done[key], default=float) + "\n")
-        r = done[key]
+    for r in rerun_trials(ap, args.trials, blind.FAMILIES, LOG, run):
+        family, seed = r["family"], r["seed"]
         share = r["tilt"]["nominal_update"]["changes"].get("tilt_share_O")
         print(f"{family} {seed} {json.dumps(r['kind'])}:")
         print(f"  as logged:       {_summary(r['logged'], s)}")
