@@ -8,7 +8,9 @@ second plant's Mayes & Davies crack of normal loss ``0.8 depth`` and a quarter o
 across; sknarx's ``BreathingCrack`` of ``depth`` 0.8 depth with the same breathing
 angle), each plant's response with the crack minus without, its 2x and 3x amplitude at
 every probe, and the static deformation of each cracked segment (what the breathing
-acts on).
+acts on); and the second plant once more with its disks' tilt damping (``c_O1``,
+``c_O2``, which it reads as acting on the tilts where sknarx puts them on the joint)
+removed, with both rotors' modes.
 
     python benchmarks/bench_crack_station_form.py [--speeds 120 200 260] [--depth 0.4]
 
@@ -39,11 +41,16 @@ def harmonic(t, rec, w, order):
     return np.array([2.0 * np.mean(rec[c] * ph) for c in CHANNELS])
 
 
-def second_records(w, depth, opening):
+def second_records(w, depth, opening, tilt_damping=1.0):
+    """The second plant's records; ``tilt_damping`` scales its ``c_O1``, ``c_O2`` (which
+    it reads as damping of the disks' tilt)."""
+    import dataclasses
+
     import plants.second_derivation as sd
 
     def run(effects):
-        rotor = sd.SecondRotor()
+        r = sd.SecondRotor()
+        rotor = dataclasses.replace(r, c_O1=r.c_O1 * tilt_damping, c_O2=r.c_O2 * tilt_damping)
         rotor.effects = effects
         return sd.SecondDerivationPlant(rotor).run(w, fs=FS, n_samples=N, settle=1.5)
 
@@ -144,7 +151,10 @@ def main(argv=None):
     args = ap.parse_args(argv)
     rows = []
     for w in args.speeds:
-        for plant, records in (("second", second_records), ("sknarx", sknarx_records)):
+        plants = (("second", second_records),
+                  ("second, c_O x0", lambda *a: second_records(*a, tilt_damping=0.0)),
+                  ("sknarx", sknarx_records))
+        for plant, records in plants:
             base, cracked = records(w, args.depth, args.opening)
             for st in STATIONS:
                 diff = {c: cracked[st][c] - base[c] for c in CHANNELS}
@@ -156,10 +166,10 @@ def main(argv=None):
                                                           strict=True))})
     print(f"crack depth {args.depth} (second plant's ratio), opening {args.opening:.2f} rad; "
           "amplitude of the crack's response, um")
-    print(f"{'rad/s':>6s} {'order':>5s} {'station':>7s} {'plant':>7s} "
+    print(f"{'rad/s':>6s} {'order':>5s} {'station':>7s} {'plant':>14s} "
           + " ".join(f"{c:>7s}" for c in CHANNELS))
     for r in sorted(rows, key=lambda r: (r["speed_rad_s"], r["order"], r["station"])):
-        print(f"{r['speed_rad_s']:6.1f} {r['order']:5d} {r['station']:>7s} {r['plant']:>7s} "
+        print(f"{r['speed_rad_s']:6.1f} {r['order']:5d} {r['station']:>7s} {r['plant']:>14s} "
               + " ".join(f"{r['amplitude_um'][c]:7.3f}" for c in CHANNELS))
     md = modes(args.speeds)
     for w in args.speeds:

@@ -87,9 +87,9 @@ class RotorParameters:
         Share (0-1) of ``c_O1`` (``c_O2``) acting on disk O1's (O2's) tilt to the frame,
         read there as N m s/rad, rather than on the joint (0). The paper's "damping
         introduced by the rotation of the disks" can be read either way
-        (``docs/rotor_model.md``); the second derivation of the gap benchmark reads it
-        on the tilts, which damps out the disks' tilting pair that this reading leaves
-        at 0.2-0.8 % -- the pair a crack's 2x and 3x excite.
+        (``docs/rotor_model.md``). On the tilts it damps out the disks' gyroscopic
+        tilting pair, which on the joint keeps under 1 % damping -- the pair a crack's
+        2x and 3x excite -- so model updating fits it.
     n_balls : int
         Number of balls Nb (8).
     R_outer, r_inner : float
