@@ -89,3 +89,16 @@ def rerun_trials(ap, items, families, log, run):
             with log.open("a") as f:
                 f.write(json.dumps(done[key], default=float) + "\n")
         yield done[key]
+
+
+def logged_eval_trial(family, seed, commits=None):
+    """The last logged (not skipped) blind evaluation trial ``family:seed``, from a run of
+    one of ``commits`` (prefixes; any when None); None if there is none."""
+    rec = None
+    for path in sorted(RESULTS.glob(f"gap_blind_eval_{family}*.jsonl")):
+        for line in path.read_text().splitlines():
+            r = json.loads(line)
+            if (r["seed"] == seed and "skipped" not in r
+                    and (commits is None or r.get("commit", "").startswith(tuple(commits)))):
+                rec = r
+    return rec

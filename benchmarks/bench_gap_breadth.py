@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_gap_blind as blind  # noqa: E402
-from _common import rerun_trials  # noqa: E402
+from _common import logged_eval_trial, rerun_trials  # noqa: E402
 
 import sknarx.gap.core as core  # noqa: E402
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -64,18 +64,8 @@ def _ranked_with_split(rank):
     return ranked
 
 
-def logged_trial(family, seed):
-    rec = None
-    for path in sorted(blind.RESULTS.glob(f"gap_blind_eval_{family}*.jsonl")):
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            if r["seed"] == seed and "skipped" not in r:
-                rec = r
-    return rec
-
-
 def run(family, seed):
-    logged = logged_trial(family, seed)
+    logged = logged_eval_trial(family, seed)
     if logged is None:
         raise SystemExit(f"bench_gap_breadth: no logged evaluation trial {family}:{seed} in "
                          f"{blind.RESULTS}; run bench_gap_blind.py first")

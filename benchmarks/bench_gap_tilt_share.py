@@ -28,7 +28,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_gap_blind as blind  # noqa: E402
 import rescore_gap_blind as rescore  # noqa: E402
-from _common import rerun_trials  # noqa: E402
+from _common import logged_eval_trial, rerun_trials  # noqa: E402
 
 import sknarx.gap.diagnosis as diagnosis  # noqa: E402
 from sknarx.gap import DiagnosisSettings  # noqa: E402
@@ -54,13 +54,7 @@ def _summary(rec, s):
 
 
 def run(family, seed):
-    logged = None
-    for path in sorted(blind.RESULTS.glob(f"gap_blind_eval_{family}*.jsonl")):
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            if r["seed"] == seed and "skipped" not in r and r.get("commit", "").startswith(
-                    ("4a216b5", "f7de2a1")):
-                logged = r
+    logged = logged_eval_trial(family, seed, commits=("4a216b5", "f7de2a1"))
     if logged is None:
         raise SystemExit(f"bench_gap_tilt_share: no logged 25000/27000 evaluation trial "
                          f"{family}:{seed}")
