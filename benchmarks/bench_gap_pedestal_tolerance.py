@@ -9,7 +9,8 @@ and the same plant without the pedestal (noise-free: ``families.make_family_tria
 ``free``), each with the package's 1x model-form tolerance and with none beyond the
 comparison's own (``sknarx.gap.diagnosis._common_1x_tolerance`` patched to give none,
 inside ``try/finally``). A pedestal the tolerance hides shows without it far above its
-effect-free plant; one the update's parameters absorb does not.
+effect-free plant; one the update's parameters absorb does not. Each channel's relative
+1x tolerance (``model_tolerance_1x``) is recorded beside it.
 
     python benchmarks/bench_gap_pedestal_tolerance.py second:31042 second:31057 ross:31039
 
@@ -33,7 +34,8 @@ from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
 
 
 def gap_before(measured, tolerance):
-    """The updated nominal model's gap per held-out feature (no candidate searched)."""
+    """The updated nominal model's gap per held-out feature (no candidate searched) and
+    each channel's relative 1x model-form tolerance the diagnosis used."""
     settings = replace(DiagnosisSettings(), no_gap_per_feature=float("inf"))
     kept = diagnosis._common_1x_tolerance
     try:
@@ -41,7 +43,9 @@ def gap_before(measured, tolerance):
             diagnosis._common_1x_tolerance = lambda update: {}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return diagnose(measured, settings=settings)["gap_before"]["per_feature"]
+            d = diagnose(measured, settings=settings)
+        tol = d["nominal_update"]["model_tolerance_1x"] if tolerance else {}
+        return d["gap_before"]["per_feature"], tol
     finally:
         diagnosis._common_1x_tolerance = kept
 
@@ -58,8 +62,12 @@ def main():
         for name, sweep in (("measured", measured), ("without_pedestal", free)):
             for tolerance in (True, False):
                 key = f"{name}_{'tolerance' if tolerance else 'no_tolerance'}"
-                row[key] = gap_before(sweep, tolerance)
-                print(f"  {item} {key}: {row[key]:.3f} per feature", flush=True)
+                row[key], tol = gap_before(sweep, tolerance)
+                if tolerance:
+                    row[f"{name}_1x_tolerance"] = tol
+                print(f"  {item} {key}: {row[key]:.3f} per feature"
+                      + (f"; 1x tolerance {', '.join(f'{c} {t:.3f}' for c, t in tol.items())}"
+                         if tol else ""), flush=True)
         rows.append(row)
     table([[r["family"], r["seed"], f"{r['measured_tolerance']:.3f}",
             f"{r['measured_no_tolerance']:.3f}", f"{r['without_pedestal_tolerance']:.3f}",
