@@ -15,9 +15,14 @@ largest signature on both independent plants is the ball-pass line above 3.5x fa
 here rebase the tolerance's share on ``min(|M|, |S|)`` (``M`` the measured feature, fixed
 per feature, so no candidate can widen it): ``lines`` for the non-synchronous lines only,
 ``all`` for every harmonic and line; the update's spread is kept in quadrature as it is.
-Each trial reports the held-out gap per feature before any effect (``e0``, the statistic
-the no-gap floor is set on) for ``base`` (the package) and each variant; the search is
-skipped (it does not bear on ``e0``).
+A fourth variant, ``no_1x``, drops the 1x model-form tolerance (what the update leaves of
+the 1x misfit that a probe pair shares, ``_common_1x_tolerance``): whether that tolerance,
+rather than the update's parameters, is what hides a soft pedestal. Each trial reports
+the held-out gap per feature before any effect (``e0``, the statistic the no-gap floor
+is set on) for ``base`` (the package) and each variant, and base's relative 1x tolerance
+per channel; the search is skipped (it does not bear on ``e0``). ``--without-effect``
+diagnoses the trial's plant without its withheld effect, noise-free (``free`` of
+``families.make_family_trial``), instead of the measured sweep.
 
 ``--decompose FAMILY:KIND:SEED`` prints where a trial's gap is, on the package's code:
 the held-out excess by feature and by channel of the measurement against the same plant
@@ -47,7 +52,7 @@ from sknarx.gap import diagnose  # noqa: E402
 from sknarx.gap.features import is_nonsync  # noqa: E402
 
 LOG = RESULTS / "gap_line_tolerance.jsonl"
-VARIANTS = ("base", "lines", "all")
+VARIANTS = ("base", "lines", "all", "no_1x")
 
 
 def _rebased(with_tolerance):
@@ -57,6 +62,9 @@ def _rebased(with_tolerance):
     def patched(meas, nominal, update, spread=None, rtol=0.01):
         out = with_tolerance(meas, nominal, update, spread, rtol)
         if state["variant"] == "base":
+            return out
+        if state["variant"] == "no_1x":  # the comparison's own rtol only
+            out.loc[(meas["feature"] == "1x").to_numpy(), "model_tol"] = 0.0
             return out
         key = ["speed", "window", "channel", "feature"]
         S = nominal.set_index(key).reindex(pd.MultiIndex.from_frame(meas[key]))
@@ -74,11 +82,13 @@ def _rebased(with_tolerance):
     return patched, state
 
 
-def run(specs):
+def run(specs, without_effect=False):
+    sweep = "without effect, noise-free" if without_effect else "measured"
     done = set()
     if LOG.exists():
-        done = {(r["family"], r["kind"], r["seed"])
-                for r in map(json.loads, LOG.read_text().splitlines())}
+        done = {(r["family"], r["kind"], r["seed"], r.get("sweep", "measured"))
+                for r in map(json.loads, LOG.read_text().splitlines())
+                if all(v in r for v in VARIANTS)}
     patched, state = _rebased(diagnosis._with_model_tolerance)
     diagnosis._with_model_tolerance = patched
     diagnosis.search = lambda *a, **k: []  # e0 only: no effect candidates
@@ -89,21 +99,25 @@ def run(specs):
     diagnosis._prediction_spread = lambda *a, **k: memo.setdefault("s", spread(*a, **k))
     for spec in specs:
         fam, kind, seed = spec.split(":")
-        if (fam, kind, int(seed)) in done:
+        if (fam, kind, int(seed), sweep) in done:
             continue
         t = time.perf_counter()
         try:
-            measured, *_ = make_family_trial(None if kind == "none" else kind, int(seed), fam)
+            measured, _, _, free = make_family_trial(None if kind == "none" else kind,
+                                                     int(seed), fam)
         except PLANT_FAILURES as exc:
             print(f"{spec}: the plant failed ({exc})", flush=True)
             continue
         memo.clear()
-        rec = {"family": fam, "kind": kind, "seed": int(seed)}
+        rec = {"family": fam, "kind": kind, "seed": int(seed), "sweep": sweep}
         for v in VARIANTS:
             state["variant"] = v
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                rec[v] = diagnose(measured)["gap_before"]["per_feature"]
+                d = diagnose(free if without_effect else measured)
+            rec[v] = d["gap_before"]["per_feature"]
+            if v == "base":
+                rec["tolerance_1x"] = d["nominal_update"]["model_tolerance_1x"]
         rec["sec"] = time.perf_counter() - t
         print(json.dumps(rec), flush=True)
         with LOG.open("a") as f:
@@ -153,11 +167,15 @@ def decompose(spec):
 
 def report():
     recs = [json.loads(line) for line in LOG.read_text().splitlines()]
-    rows = [[r["family"], r["kind"], r["seed"], *(f"{r[v]:.3f}" for v in VARIANTS),
+    rows = [[r["family"], r["kind"], r["seed"], r.get("sweep", "measured"),
+             *(f"{r[v]:.3f}" if v in r else "-" for v in VARIANTS),
              f"{r['lines'] - r['base']:+.3f}"] for r in recs]
-    table(rows, ["family", "kind", "seed", *(f"e0 {v}" for v in VARIANTS), "lines - base"])
+    table(rows, ["family", "kind", "seed", "sweep", *(f"e0 {v}" for v in VARIANTS),
+                 "lines - base"])
     groups = {}
     for r in recs:
+        if r.get("sweep", "measured") != "measured":
+            continue
         groups.setdefault(f"{r['family']} {r['kind']}", []).append(r["lines"] - r["base"])
     summary = {k: {"n": len(v), "median_rise": float(np.median(v)), "min_rise": min(v),
                    "max_rise": max(v)} for k, v in groups.items()}
@@ -172,6 +190,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("trials", nargs="*", help="FAMILY:KIND:SEED (KIND none: effect-free)")
     ap.add_argument("--report", action="store_true", help="print and write the logged trials")
+    ap.add_argument("--without-effect", action="store_true",
+                    help="diagnose each trial's plant without its withheld effect, noise-free")
     ap.add_argument("--decompose", metavar="FAMILY:KIND:SEED",
                     help="where one trial's gap is (package code, no variant)")
     args = ap.parse_args()
@@ -184,7 +204,7 @@ def main():
         parts = spec.split(":")
         if len(parts) != 3 or not parts[2].isdigit():
             ap.error(f"a trial is FAMILY:KIND:SEED, got {spec!r}")
-    run(args.trials)
+    run(args.trials, args.without_effect)
     if args.report:
         if not LOG.exists():
             ap.error(f"no trials logged in {LOG}")
