@@ -5,8 +5,10 @@ disks' tilt; sknarx's rotor puts them on the joint, which leaves the disks' tilt
 pair at 0.2-0.8 % damping, and a crack's 2x and 3x answer differently on the two
 (``bench_crack_station_form.py``). ``RotorParameters.tilt_share_O`` reads a share of
 them on the tilts, and the nominal update fits it (prior +-0.5 about 0, bounds 0-1, as
-the disk dampers' ``frame_share_d1``, ``frame_share_d2``; added to the package's update
-after this benchmark's first four trials, which added it here). This re-runs logged
+the disk dampers' ``frame_share_d1``, ``frame_share_d2``). The first four trials in the
+log were run before the package's update had it, by this script adding the same
+parameter at the end of the update's list (see the script as of ``55c392b^``); now the
+package fits it and the script runs the package as it is. This re-runs logged
 trials of the 25000 and 27000 runs, decided before the update had it, and prints the
 verdict, the crack's place and the gap beside the log's.
 
@@ -18,7 +20,6 @@ Writes ``results/gap_tilt_share.jsonl`` (a trial there is not run again).
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import sys
 import time
@@ -30,13 +31,9 @@ import bench_gap_blind as blind  # noqa: E402
 import rescore_gap_blind as rescore  # noqa: E402
 from _common import logged_eval_trial, rerun_trials  # noqa: E402
 
-import sknarx.gap.diagnosis as diagnosis  # noqa: E402
 from sknarx.gap import DiagnosisSettings  # noqa: E402
-from sknarx.gap.updating import DEFAULT_PARAMETERS, UpdatingParameter  # noqa: E402
 
 LOG = blind.RESULTS / "gap_tilt_share.jsonl"
-TILT = UpdatingParameter("tilt_share_O", 0.5, log=False, bounds=(0.0, 1.0), unit="",
-                         label="share of c_O1, c_O2 acting on the disks' tilt")
 REPORT = "results/bench_gap_blind_27000_4a216b5.json"
 
 
@@ -58,18 +55,9 @@ def run(family, seed):
     if logged is None:
         raise SystemExit(f"bench_gap_tilt_share: no logged 25000/27000 evaluation trial "
                          f"{family}:{seed}")
-    update = diagnosis.update_nominal_model
-    # the package's update fits the share since 2026-11-27; before, it was added here
-    names = {p.name for p in DEFAULT_PARAMETERS}
-    spec = DEFAULT_PARAMETERS if TILT.name in names else DEFAULT_PARAMETERS + (TILT,)
-    diagnosis.update_nominal_model = functools.partial(update, parameters=spec)
-    try:
-        t = time.perf_counter()
-        kind = None if logged["kind"] == "none" else logged["kind"]  # effect-free
-        rec = blind.run_trial(kind, seed, family,
-                              replace(DiagnosisSettings(), pair_trigger=0.2))
-    finally:
-        diagnosis.update_nominal_model = update
+    t = time.perf_counter()
+    kind = None if logged["kind"] == "none" else logged["kind"]  # effect-free
+    rec = blind.run_trial(kind, seed, family, replace(DiagnosisSettings(), pair_trigger=0.2))
     rec["seconds_total"] = time.perf_counter() - t
     rec["commit"] = blind.git_commit()
     return {"family": family, "seed": seed, "kind": logged["kind"], "logged": logged,
