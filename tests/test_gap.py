@@ -172,22 +172,27 @@ def _feature_frame(rng, speeds=(100.0, 150.0), channels=("xO1", "xA"), tol_1x=0.
     return f
 
 
-@given(st.integers(0, 2**31 - 1), st.floats(0.0, 0.9))
-def test_the_calibration_residual_is_the_gap_maps_comparison(seed, tol_1x):
-    # one kernel for both: what a calibration minimises is what the gap map reports
-    from sknarx.gap.gapmap import fast_residual, feature_layout
+@given(st.integers(0, 2**31 - 1), st.floats(0.0, 0.9), st.booleans())
+def test_the_calibration_residual_is_the_gap_maps_comparison(seed, tol_1x, whirl):
+    # one kernel for both: what a calibration minimises is what the gap map reports,
+    # channel by channel or in a probe pair's whirl
+    from sknarx.gap.gapmap import fast_residual, feature_layout, whirl_layout
 
     rng = np.random.default_rng(seed)
-    meas = _feature_frame(rng, tol_1x=tol_1x)
+    meas = _feature_frame(rng, channels=("xO1", "yO1", "xA"), tol_1x=tol_1x)
+    if whirl:
+        meas["whirl_tol"] = 1e-6 * rng.random(len(meas))
     sim = meas.assign(re=meas.re * (1 + 0.3 * rng.standard_normal(len(meas))),
                       im=meas.im + 2e-6 * rng.standard_normal(len(meas)),
-                      se=1e-7).drop(columns="model_tol")
+                      se=1e-7).drop(columns=["model_tol", "whirl_tol"], errors="ignore")
     cmp = compare(meas, sim)
-    order_k, speed_idx, group_idx = feature_layout(
-        meas.set_index(["speed", "window", "channel", "feature"]).index)
+    index = meas.set_index(["speed", "window", "channel", "feature"]).index
+    order_k, speed_idx, group_idx = feature_layout(index)
     r = fast_residual(meas.re.to_numpy() + 1j * meas.im.to_numpy(), meas.se.to_numpy(),
                       sim.re.to_numpy() + 1j * sim.im.to_numpy(), sim.se.to_numpy(),
-                      order_k, speed_idx, group_idx, model_tol=meas.model_tol.to_numpy())
+                      order_k, speed_idx, group_idx, model_tol=meas.model_tol.to_numpy(),
+                      whirl=whirl_layout(index, meas["whirl_tol"].to_numpy())
+                      if whirl else None)
     n = len(meas)
     np.testing.assert_allclose(r[:n] ** 2 + r[n:] ** 2, cmp.z2.to_numpy(), rtol=1e-9)
 
@@ -205,6 +210,43 @@ def test_a_journals_harmonics_follow_its_admitted_1x_phase_error():
     for tol_1x, is_gap in ((0.6, False), (0.1, True), (0.0, True)):
         m = meas.assign(model_tol=np.where(meas.feature == "1x", tol_1x * 1e-4, 0.0))
         assert (compare(m, sim).z2.to_numpy()[harm].max() > 9) == is_gap, tol_1x
+
+
+def _orbit_pair(radius=1e-4, se=1e-8):
+    """A probe pair's 1x on a forward circular orbit (x = r, y = -j r), one speed."""
+    f = pd.DataFrame({"speed": 100.0, "window": "steady", "channel": ["xO1", "yO1"],
+                      "feature": "1x", "re": [radius, 0.0], "im": [0.0, -radius], "se": se})
+    return f
+
+
+@pytest.mark.parametrize("whirl", ["forward", "backward"])
+def test_a_probe_pairs_ellipse_is_not_tolerated_as_isotropic_model_error(whirl):
+    # both channels 5 % off, inside their 10 % 1x model-form tolerance: a larger circle
+    # (forward whirl) is what the update's isotropic parameters leave; an ellipse
+    # (backward whirl) is not, once the comparison knows the model's own ellipse
+    # (``whirl_tol``) -- channel by channel the two look alike
+    sim = _orbit_pair()
+    eps = 0.05 * 1e-4
+    d_y = -1j * eps if whirl == "forward" else 1j * eps
+    meas = sim.assign(re=sim.re + [eps, d_y.real], im=sim.im + [0.0, d_y.imag],
+                      model_tol=0.1 * 1e-4)
+    assert compare(meas, sim).z2.max() < 2  # channel by channel
+    for tol_b, is_gap in ((0.0, whirl == "backward"), (3 * eps, False)):
+        z2 = compare(meas.assign(whirl_tol=tol_b), sim).z2
+        assert (z2.sum() > 18) == is_gap, (whirl, tol_b)
+
+
+@given(st.integers(0, 2**31 - 1))
+def test_the_whirl_basis_changes_nothing_without_tolerances(seed):
+    # the whirl basis is a rotation of the pair's residuals: with equal noise on both
+    # channels and no model-form tolerance it leaves the pair's summed z2 unchanged
+    rng = np.random.default_rng(seed)
+    sim = _orbit_pair(radius=float(rng.uniform(1e-6, 1e-4)))
+    meas = sim.assign(re=sim.re + 1e-6 * rng.standard_normal(2),
+                      im=sim.im + 1e-6 * rng.standard_normal(2))
+    plain = compare(meas, sim).z2.sum()
+    np.testing.assert_allclose(compare(meas.assign(whirl_tol=0.0), sim).z2.sum(), plain,
+                               rtol=1e-9)
 
 
 @given(st.dictionaries(st.sampled_from(["xO1", "yO1", "xA", "yA", "xB", "yB", "xO2"]),

@@ -26,7 +26,15 @@ from scipy.optimize import least_squares
 
 from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
 from .features import record_features, stack_features
-from .gapmap import compare, fast_residual, feature_layout, gap_statistic, model_tol
+from .gapmap import (
+    compare,
+    fast_residual,
+    feature_layout,
+    gap_statistic,
+    model_tol,
+    whirl_layout,
+    whirl_tol,
+)
 from .jacobian import SecantJacobian, SettledStop
 
 __all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
@@ -286,12 +294,14 @@ def _probe_key(classes, combo, x):
 
 
 def _measured_arrays(meas_feats, index):
-    """Measured vectors (m), standard errors and model-form tolerances (m) in the order
-    of the simulated features' ``index``."""
+    """Measured vectors (m), standard errors, model-form tolerances (m) and the probe
+    pairs' whirl layout (:func:`~sknarx.gap.gapmap.whirl_layout`) in the order of the
+    simulated features' ``index``."""
     m = meas_feats.set_index(list(index.names)).reindex(index)
     if m["re"].isna().any():
         raise ValueError("measured and simulated features do not align")
-    return m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy(), model_tol(m)
+    return (m["re"].to_numpy() + 1j * m["im"].to_numpy(), m["se"].to_numpy(), model_tol(m),
+            whirl_layout(index, whirl_tol(m)))
 
 
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
@@ -342,7 +352,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     speeds = np.asarray(speeds, dtype=float)
     keys, _, _, _ = model.feature_arrays(speeds, np.array([1.0, 0.0, 1.0, 1.0]))
     index = pd.MultiIndex.from_tuples(keys, names=["speed", "window", "channel", "feature"])
-    Mc, se_m, tol = _measured_arrays(meas_feats, index)
+    Mc, se_m, tol, whirl = _measured_arrays(meas_feats, index)
     order_k, speed_idx, group_idx = feature_layout(index)
     size = 2 * len(keys)
     project = _projection(classes, keys, order_k, Mc, se_m)
@@ -363,7 +373,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                 _, Sc, se_s, _ = f
                 Sc, _ = project(Sc, se_s)
                 r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                                  model_tol=tol)
+                                  model_tol=tol, whirl=whirl)
             except (SimulationDivergenceError, ValueError, FloatingPointError):
                 r = np.full(size, 1e3)
             out.append(r if np.all(np.isfinite(r)) else np.full(size, 1e3))

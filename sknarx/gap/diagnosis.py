@@ -62,7 +62,7 @@ from .core import (
     table_evidence,
 )
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
-from .gapmap import HARMONIC_TOL, regions
+from .gapmap import HARMONIC_TOL, regions, whirl_layout
 from .result import GapDiagnosis
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
@@ -172,8 +172,10 @@ def _with_model_tolerance(meas, nominal, update, spread=None, rtol=0.01):
     line, ``HARMONIC_TOL |S|`` -- the model's own harmonics come from a contact law no
     rig matches -- and, in quadrature, ``spread``: the feature's spread over the
     update's uncertainty (:func:`_prediction_spread`, aligned with ``nominal``). What
-    exceeds that is what effects must explain. ``nominal``: the updated nominal model's
-    features at every speed."""
+    exceeds that is what effects must explain. A ``whirl_tol`` column adds each probe
+    pair's backward-whirl tolerance (:func:`_backward_whirl`): the 1x tolerance above
+    then admits a larger or smaller circle, not an ellipse. ``nominal``: the updated
+    nominal model's features at every speed."""
     key = ["speed", "window", "channel", "feature"]
     nominal = nominal.copy()
     nominal["spread"] = 0.0 if spread is None else spread
@@ -186,6 +188,23 @@ def _with_model_tolerance(meas, nominal, update, spread=None, rtol=0.01):
     widen = np.where(is1, 0.0, np.nan_to_num(S["spread"].to_numpy(dtype=float)))
     out = meas.copy()
     out["model_tol"] = np.nan_to_num(np.hypot(share * size, widen))
+    out["whirl_tol"] = _backward_whirl(S)
+    return out
+
+
+def _backward_whirl(S):
+    """Each probe pair's backward-whirl tolerance (m) on both of its 1x rows: the
+    smaller circular component of the updated nominal model's own 1x orbit, ``|x - j y|
+    / sqrt 2`` or ``|x + j y| / sqrt 2`` (0 elsewhere). The model's ellipse comes from its
+    gravity-loaded contacts, whose anisotropy no rig matches, and is trusted to its
+    own size as its harmonics are (``HARMONIC_TOL``); what a support stiffer in one
+    direction adds beyond it is an effect's to explain (see ``gapmap.compare``). ``S``:
+    the nominal model's features aligned with the measured rows."""
+    ix, iy, _ = whirl_layout(S.index, np.zeros(len(S)))
+    z = S["re"].to_numpy(dtype=float) + 1j * S["im"].to_numpy(dtype=float)
+    b = np.minimum(np.abs(z[ix] + 1j * z[iy]), np.abs(z[ix] - 1j * z[iy])) / np.sqrt(2.0)
+    out = np.zeros(len(S))
+    out[ix] = out[iy] = HARMONIC_TOL * np.nan_to_num(b)
     return out
 
 

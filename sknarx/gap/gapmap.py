@@ -76,8 +76,62 @@ def _per_group(idx, values, n):
         idx, weights=values.imag, minlength=n)
 
 
+def whirl_tol(meas: pd.DataFrame) -> np.ndarray | None:
+    """Each measured 1x's backward-whirl tolerance (m): its ``whirl_tol`` column, fixed
+    once from the updated nominal model and the same on both channels of a probe pair;
+    None when absent (the comparison stays channel by channel)."""
+    if "whirl_tol" not in meas.columns:
+        return None
+    return meas["whirl_tol"].fillna(0.0).to_numpy(dtype=float)
+
+
+def whirl_layout(index: pd.MultiIndex, tol_b: np.ndarray | None):
+    """``(ix, iy, tol_b)``: the positions of each probe pair's 1x (``xA`` with ``yA``,
+    at one speed step and window) in features indexed by ``speed, window, channel,
+    feature``, and the pair's backward-whirl tolerance (m); None without ``tol_b``."""
+    if tol_b is None:
+        return None
+    frame = index.to_frame(index=False)
+    ch = frame["channel"].astype(str)
+    is_x = (frame["feature"] == "1x") & ch.str.startswith("x")
+    pos = pd.Series(np.arange(len(frame)), index=pd.MultiIndex.from_arrays(
+        [frame["speed"], frame["window"], ch, frame["feature"]]))
+    xs = frame[is_x.to_numpy()]
+    partner = pd.MultiIndex.from_arrays([xs["speed"], xs["window"],
+                                         "y" + ch[is_x].str[1:], xs["feature"]])
+    iy = pos.reindex(partner).to_numpy()
+    ix = np.flatnonzero(is_x.to_numpy())
+    has = ~np.isnan(iy)
+    ix, iy = ix[has], iy[has].astype(int)
+    return ix, iy, np.asarray(tol_b, dtype=float)[ix]
+
+
+def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
+    """A probe pair's normalised 1x residuals, whitened in the whirl basis and rotated
+    back onto the pair's two channels (their summed ``z2`` is the pair's).
+
+    ``p = (x + j y) / sqrt 2`` and ``q = (x - j y) / sqrt 2`` are the orbit's two
+    circular components; the larger of the model's is its forward whirl. Noise and the
+    comparison's ``rtol`` are shared equally, as in the channel basis; the pair's 1x
+    model-form tolerance (``mtol``: what the update's isotropic parameters left of the
+    1x misfit) goes to the forward whirl alone, and the backward whirl is trusted only
+    to ``tol_b``, the updated nominal model's own backward whirl. An axisymmetric rotor
+    on like supports whirls forward; an ellipse (a support stiffer in one direction)
+    is what its parameters cannot make, and at a disk far from the gravity-loaded
+    contacts the model's ellipse is a tenth of a per cent of its orbit."""
+    root2 = np.sqrt(2.0)
+    p, q = (r_x + 1j * r_y) / root2, (r_x - 1j * r_y) / root2
+    p_fwd = np.abs(S_x + 1j * S_y) >= np.abs(S_x - 1j * S_y)
+    base = 0.5 * (var_x + var_y - mtol_x**2 - mtol_y**2)
+    fwd, bwd = base + mtol_x**2 + mtol_y**2, base + tol_b**2
+    var_p, var_q = np.where(p_fwd, fwd, bwd), np.where(p_fwd, bwd, fwd)
+    dp = p / np.sqrt(np.maximum(var_p, 1e-300))
+    dq = q / np.sqrt(np.maximum(var_q, 1e-300))
+    return (dp + dq) / root2, -1j * (dp - dq) / root2
+
+
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                max_offset_deg):
+                max_offset_deg, whirl=None):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
     ``(M - S) / sigma`` per feature, complex, and the phase-aligned measured ``M``.
 
@@ -116,7 +170,12 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
                    se_m**2 + se_s**2) + (rtol * np.abs(Sc)) ** 2 + tol**2
     var = var + np.where(harmonic, (HARMONIC_RTOL * np.minimum(np.abs(M), np.abs(Sc))) ** 2,
                          0.0)
-    return (M - Sc) / np.sqrt(np.maximum(var, 1e-300)), M
+    d = (M - Sc) / np.sqrt(np.maximum(var, 1e-300))
+    if whirl is not None and whirl[0].size:
+        ix, iy, tol_b = whirl
+        d[ix], d[iy] = _whirl_whitened(M[ix] - Sc[ix], M[iy] - Sc[iy], var[ix], var[iy],
+                                       tol[ix], tol[iy], tol_b, Sc[ix], Sc[iy])
+    return d, M
 
 
 def feature_layout(index: pd.MultiIndex):
@@ -138,7 +197,10 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     A ``model_tol`` column in ``meas`` (m) widens each feature's tolerance by the
     model-form error the nominal model is allowed (see ``diagnosis``); harmonics agree
     to within ``HARMONIC_RTOL`` and are compared in phase with their channel's 1x as far
-    as its tolerance admits (see :func:`fast_residual`'s kernel, shared).
+    as its tolerance admits (see :func:`fast_residual`'s kernel, shared). With a
+    ``whirl_tol`` column (m) each probe pair's 1x is compared in its forward and
+    backward whirl, the 1x model-form tolerance on the forward whirl only (see
+    ``_whirl_whitened``); the table stays one row per channel.
     """
     key = ["speed", "window", "channel", "feature"]
     m = meas.set_index(key)
@@ -148,7 +210,8 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     order_k, speed_idx, group_idx = feature_layout(m.index)
     tol = model_tol(m)
     d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k,
-                       speed_idx, group_idx, tol, rtol, max_offset_deg)
+                       speed_idx, group_idx, tol, rtol, max_offset_deg,
+                       whirl_layout(m.index, whirl_tol(m)))
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)
@@ -161,12 +224,13 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
 
 
 def fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, rtol=0.01,
-                  max_offset_deg=5.0, model_tol=None):
+                  max_offset_deg=5.0, model_tol=None, whirl=None):
     """Normalised residuals of aligned feature arrays (the calibration's inner loop), as
     :func:`compare` computes them; the layout from :func:`feature_layout`, ``model_tol``
-    (m) per feature."""
+    (m) per feature, ``whirl`` the probe pairs from :func:`whirl_layout` (None: channel
+    by channel)."""
     d, _ = _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol,
-                       rtol, max_offset_deg)
+                       rtol, max_offset_deg, whirl)
     return np.concatenate([d.real, d.imag])
 
 
