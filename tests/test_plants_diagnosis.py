@@ -111,19 +111,24 @@ def test_a_soft_pedestal_on_the_second_plant_is_not_taken_as_model_form_toleranc
     # the blind benchmark's anisotropy 16027 (second plant, soft vertical pedestals): the
     # isotropic update cannot follow the split, and a per-channel tolerance took it (yA's
     # misfit 15 % against xA's 3 %: gap 0.14 per feature, no-gap). A probe pair's
-    # directions share one tolerance, the smaller: the softened direction's 1x leads a gap
-    # above the floor, for an effect to explain
+    # directions share one tolerance, the smaller (0.48 per feature), and that tolerance
+    # admits a larger or smaller circle, not an ellipse: the disk's elliptic orbit,
+    # which no isotropic parameter makes, now leads a gap (measured 0.78, O1's 1x 86 %
+    # of it) that the same plant without its pedestal does not have
     from sknarx.gap import diagnose
 
-    meas, truth, *_ = make_family_trial("anisotropy", 16027, "second")
+    meas, truth, _, free = make_family_trial("anisotropy", 16027, "second")
     assert truth["effects"]["anisotropy"]["soft_axis"] == "y"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         d = diagnose(meas, channels=list(CHANNELS), candidates=())
+        d_free = diagnose(free, channels=list(CHANNELS), candidates=())
     upd = d["nominal_update"]
     own, used = upd["channel_misfit_1x"], upd["model_tolerance_1x"]
     assert own["yA"] > 3 * own["xA"]
     assert used["yA"] == used["xA"] == own["xA"]
-    assert d["gap_before"]["per_feature"] > DiagnosisSettings().no_gap_per_feature
+    floor = DiagnosisSettings().no_gap_per_feature
+    assert d["gap_before"]["per_feature"] > 2 * floor
+    assert d_free["gap_before"]["per_feature"] < 0.5 * floor
     excess = d.tables["before"].groupby(["channel", "feature"]).excess.sum()
-    assert excess.idxmax() == ("yA", "1x")
+    assert excess[[("xO1", "1x"), ("yO1", "1x")]].sum() > 0.5 * excess.sum()
