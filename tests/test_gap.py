@@ -362,6 +362,10 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     spread = doc["nominal_update"]["harmonic_spread"]
     assert spread["sigma_points"] > 0 and spread["max_m"] >= spread["median_m"] > 0
     assert f"spread over {spread['sigma_points']} sweeps" in html
+    whirl = doc["nominal_update"]["backward_whirl_1x"]
+    assert set(whirl["pairs"]) == {"xO1/yO1", "xA/yA"}
+    assert all(v["max_m"] >= v["median_m"] > 0 for v in whirl["pairs"].values())
+    assert "backward whirl" in html
     assert (tmp_path / "out" / "gap_map.png").exists()
 
 

@@ -208,6 +208,21 @@ def _backward_whirl(S):
     return out
 
 
+def _whirl_summary(meas) -> dict:
+    """Each probe pair's backward-whirl tolerance (the ``whirl_tol`` column of
+    :func:`_with_model_tolerance`) over the speeds, median and largest (m), and the rule."""
+    one = meas[meas["feature"] == "1x"]
+    have = set(one["channel"])
+    pairs = {f"{c}/y{c[1:]}": {"median_m": float(g["whirl_tol"].median()),
+                               "max_m": float(g["whirl_tol"].max())}
+             for c, g in one.groupby("channel") if c[0] == "x" and f"y{c[1:]}" in have}
+    return {"pairs": pairs,
+            "rule": "each probe pair's 1x is compared in its forward and backward whirl: "
+                    "the 1x model-form tolerance admits a larger or smaller circle "
+                    "(forward whirl) only; the orbit's ellipse (backward whirl) is "
+                    "trusted to the updated nominal model's own"}
+
+
 def _update_summary(update) -> dict | None:
     """The nominal update as plain JSON: what changed, how sure, what is inseparable."""
     if update is None:
@@ -590,6 +605,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
             "rule": "each harmonic's and line's model-form tolerance is widened, in "
                     "quadrature, by its spread over the update's sigma points and the "
                     "rotor before the update"}
+    if update is not None:
+        doc["nominal_update"]["backward_whirl_1x"] = _whirl_summary(meas)
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
     if e0 <= settings.no_gap_per_feature and not exhaustive:

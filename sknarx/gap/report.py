@@ -103,13 +103,18 @@ def _update_html(upd) -> str:
               f"the update's sigma points and the rotor before the update (median "
               f"{quantity(hs['median_m'], 'm')}, largest {quantity(hs['max_m'], 'm')}).</p>"
               if hs else "")
+    bw = upd.get("backward_whirl_1x")
+    whirl = (f"<p>{html.escape(bw['rule'][0].upper() + bw['rule'][1:])} (median over the "
+             "speeds: " + ", ".join(f"{html.escape(k)} {quantity(v['median_m'], 'm')}"
+                                    for k, v in bw["pairs"].items()) + ").</p>"
+             if bw and bw["pairs"] else "")
     return (f"<h2>Nominal model updated (model error, not an effect)</h2>"
             f"<p>{html.escape(listed)}. Relative 1x mismatch at the training speeds "
             f"{100 * mm['before']:.2f} % before, {100 * mm['after']:.2f} % after. "
             f"{html.escape(upd['method'])}.</p>{table(rows, heads)}"
             "<p class=\"note\">Resolution: 1 - posterior/prior variance (0: the data say "
             "nothing about it). Pairs these data cannot separate (only a combination is "
-            f"determined):</p><ul>{pairs or '<li>none</li>'}</ul>{spread}")
+            f"determined):</p><ul>{pairs or '<li>none</li>'}</ul>{spread}{whirl}")
 
 
 def _label(effect):
