@@ -62,7 +62,7 @@ from .core import (
     table_evidence,
 )
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
-from .gapmap import HARMONIC_TOL, regions, whirl_layout
+from .gapmap import HARMONIC_TOL, circular_components, regions, whirl_pairs
 from .result import GapDiagnosis
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
@@ -200,9 +200,10 @@ def _backward_whirl(S):
     own size as its harmonics are (``HARMONIC_TOL``); what a support stiffer in one
     direction adds beyond it is an effect's to explain (see ``gapmap.compare``). ``S``:
     the nominal model's features aligned with the measured rows."""
-    ix, iy, _ = whirl_layout(S.index, np.zeros(len(S)))
+    ix, iy = whirl_pairs(S.index)
     z = S["re"].to_numpy(dtype=float) + 1j * S["im"].to_numpy(dtype=float)
-    b = np.minimum(np.abs(z[ix] + 1j * z[iy]), np.abs(z[ix] - 1j * z[iy])) / np.sqrt(2.0)
+    p, q = circular_components(z[ix], z[iy])
+    b = np.minimum(np.abs(p), np.abs(q))
     out = np.zeros(len(S))
     out[ix] = out[iy] = HARMONIC_TOL * np.nan_to_num(b)
     return out
@@ -211,11 +212,12 @@ def _backward_whirl(S):
 def _whirl_summary(meas) -> dict:
     """Each probe pair's backward-whirl tolerance (the ``whirl_tol`` column of
     :func:`_with_model_tolerance`) over the speeds, median and largest (m), and the rule."""
-    one = meas[meas["feature"] == "1x"]
-    have = set(one["channel"])
-    pairs = {f"{c}/y{c[1:]}": {"median_m": float(g["whirl_tol"].median()),
-                               "max_m": float(g["whirl_tol"].max())}
-             for c, g in one.groupby("channel") if c[0] == "x" and f"y{c[1:]}" in have}
+    key = ["speed", "window", "channel", "feature"]
+    ix, iy = whirl_pairs(pd.MultiIndex.from_frame(meas[key]))
+    rows = meas.iloc[ix]
+    label = rows["channel"].to_numpy() + "/" + meas["channel"].to_numpy()[iy]
+    pairs = {k: {"median_m": float(g.median()), "max_m": float(g.max())}
+             for k, g in rows["whirl_tol"].groupby(label)}
     return {"pairs": pairs,
             "rule": "each probe pair's 1x is compared in its forward and backward whirl: "
                     "the 1x model-form tolerance admits a larger or smaller circle "

@@ -85,12 +85,9 @@ def whirl_tol(meas: pd.DataFrame) -> np.ndarray | None:
     return meas["whirl_tol"].fillna(0.0).to_numpy(dtype=float)
 
 
-def whirl_layout(index: pd.MultiIndex, tol_b: np.ndarray | None):
-    """``(ix, iy, tol_b)``: the positions of each probe pair's 1x (``xA`` with ``yA``,
-    at one speed step and window) in features indexed by ``speed, window, channel,
-    feature``, and the pair's backward-whirl tolerance (m); None without ``tol_b``."""
-    if tol_b is None:
-        return None
+def whirl_pairs(index: pd.MultiIndex) -> tuple[np.ndarray, np.ndarray]:
+    """``(ix, iy)``: the positions of each probe pair's 1x (``xA`` with ``yA``, at one
+    speed step and window) in features indexed by ``speed, window, channel, feature``."""
     frame = index.to_frame(index=False)
     ch = frame["channel"].astype(str)
     is_x = (frame["feature"] == "1x") & ch.str.startswith("x")
@@ -102,8 +99,24 @@ def whirl_layout(index: pd.MultiIndex, tol_b: np.ndarray | None):
     iy = pos.reindex(partner).to_numpy()
     ix = np.flatnonzero(is_x.to_numpy())
     has = ~np.isnan(iy)
-    ix, iy = ix[has], iy[has].astype(int)
+    return ix[has], iy[has].astype(int)
+
+
+def whirl_layout(index: pd.MultiIndex, tol_b: np.ndarray | None):
+    """``(ix, iy, tol_b)``: the probe pairs' positions (:func:`whirl_pairs`) and each
+    pair's backward-whirl tolerance (m); None without ``tol_b``."""
+    if tol_b is None:
+        return None
+    ix, iy = whirl_pairs(index)
     return ix, iy, np.asarray(tol_b, dtype=float)[ix]
+
+
+def circular_components(x, y):
+    """A probe pair's two circular components ``((x + j y) / sqrt 2, (x - j y) / sqrt 2)``
+    (complex 1x vectors, either sense of rotation); their sizes' sum of squares is
+    ``|x|^2 + |y|^2``."""
+    root2 = np.sqrt(2.0)
+    return (x + 1j * y) / root2, (x - 1j * y) / root2
 
 
 def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
@@ -119,15 +132,15 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
     on like supports whirls forward; an ellipse (a support stiffer in one direction)
     is what its parameters cannot make, and at a disk far from the gravity-loaded
     contacts the model's ellipse is a tenth of a per cent of its orbit."""
-    root2 = np.sqrt(2.0)
-    p, q = (r_x + 1j * r_y) / root2, (r_x - 1j * r_y) / root2
-    p_fwd = np.abs(S_x + 1j * S_y) >= np.abs(S_x - 1j * S_y)
+    p, q = circular_components(r_x, r_y)
+    s_p, s_q = circular_components(S_x, S_y)
+    p_fwd = np.abs(s_p) >= np.abs(s_q)
     base = 0.5 * (var_x + var_y - mtol_x**2 - mtol_y**2)
     fwd, bwd = base + mtol_x**2 + mtol_y**2, base + tol_b**2
     var_p, var_q = np.where(p_fwd, fwd, bwd), np.where(p_fwd, bwd, fwd)
     dp = p / np.sqrt(np.maximum(var_p, 1e-300))
     dq = q / np.sqrt(np.maximum(var_q, 1e-300))
-    return (dp + dq) / root2, -1j * (dp - dq) / root2
+    return (dp + dq) / np.sqrt(2.0), -1j * (dp - dq) / np.sqrt(2.0)
 
 
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
