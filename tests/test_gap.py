@@ -985,6 +985,49 @@ def test_a_partner_solved_in_closed_form_is_scored_without_a_local_run():
     assert set(probe.effect_params[1]["vectors"]) == set(channels)
 
 
+def test_basins_are_ranked_in_the_channel_basis_and_converged_in_the_whirl_basis(
+        monkeypatch):
+    """With a probe pair's whirl compared (a ``whirl_tol`` column), a calibration's
+    probes are scored in both bases from one simulation, its short runs rank basins in
+    the channel basis and its converged run is the whirl basis's; a probes-only score
+    (a partner's) is the whirl basis's. Without the column: one basis throughout."""
+    import sknarx.gap.calibration as cal_mod
+    from sknarx.rotor import EFFECTS
+
+    measured, _ = make_trial("rub", 3, speeds=SPEEDS[:4], n_samples=600)
+    model, meas, train, _ = _calibration_setup(measured)
+    cal0 = cal_mod.calibrate(model, meas, train, (), max_nfev=2)
+    kw = {"starts": [cal0.x], "n_probe": 4, "n_short": 2}
+    calls = []
+    real = cal_mod.fast_residual
+
+    def spy(*a, whirl=None, **k):
+        calls.append(whirl is not None)
+        return real(*a, whirl=whirl, **k)
+
+    monkeypatch.setattr(cal_mod, "fast_residual", spy)
+    strict = meas.assign(whirl_tol=0.0)
+    cache = {}
+    probe = cal_mod.calibrate(model, strict, train, [EFFECTS["rub"]], max_nfev=0,
+                              probe_cache=cache, **kw)
+    assert {len(v) for v in cache.values()} == {2}
+    assert probe.cost == min(v[0] for v in cache.values())  # the whirl basis's
+    assert calls == [True, False] * len(calls[::2])  # one simulation, both bases
+    calls.clear()
+    fit = cal_mod.calibrate(model, strict, train, [EFFECTS["rub"]], max_nfev=4, **kw)
+    n_probe_calls = 2 * 5 * len(EFFECTS["rub"].discrete["at"])  # 4 probes + the start
+    short, final = calls[n_probe_calls:], []
+    while short and short[-1]:
+        final.append(short.pop())
+    assert final and short and not any(short)  # channel-basis short runs, then whirl
+    assert np.isfinite(fit.cost)
+    calls.clear()
+    cache = {}
+    cal_mod.calibrate(model, meas, train, [EFFECTS["rub"]], max_nfev=0, probe_cache=cache,
+                      **kw)
+    assert {len(v) for v in cache.values()} == {1} and not any(calls)
+
+
 def test_each_discrete_setting_is_converged_and_offered_to_the_caller():
     """A crack's stations are not chosen by a three-iteration short run: each station's
     best short run is converged and, with ``each_discrete``, every one is returned (the

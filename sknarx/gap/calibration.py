@@ -358,29 +358,33 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)
 
-    def residuals(xs, combo=combos[0], sweep=model):
-        """The residual at each of the points ``xs``, simulated together (probes and a
+    def simulated(xs, combo, sweep):
+        """The features at each of the points ``xs``, simulated together (probes and a
         difference Jacobian's columns are independent points)."""
         points = [_decode(x, classes, log, combo) for x in xs]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            feats = sweep.feature_arrays_many(speeds, points)
-        out = []
-        for f in feats:
-            try:
-                if isinstance(f, Exception):
-                    raise f
-                _, Sc, se_s, _ = f
-                Sc, _ = project(Sc, se_s)
-                r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                                  model_tol=tol, whirl=whirl)
-            except (SimulationDivergenceError, ValueError, FloatingPointError):
-                r = np.full(size, 1e3)
-            out.append(r if np.all(np.isfinite(r)) else np.full(size, 1e3))
-        return out
+            return sweep.feature_arrays_many(speeds, points)
 
-    def residual(x, combo=combos[0], sweep=model):
-        return residuals([x], combo, sweep)[0]
+    def compared(f, basis):
+        """One point's residual; ``basis``: the probe pairs' whirl layout, None for
+        the channel basis."""
+        try:
+            if isinstance(f, Exception):
+                raise f
+            _, Sc, se_s, _ = f
+            Sc, _ = project(Sc, se_s)
+            r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
+                              model_tol=tol, whirl=basis)
+        except (SimulationDivergenceError, ValueError, FloatingPointError):
+            r = np.full(size, 1e3)
+        return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
+
+    def residuals(xs, combo=combos[0], sweep=model, basis=whirl):
+        return [compared(f, basis) for f in simulated(xs, combo, sweep)]
+
+    def residual(x, combo=combos[0], sweep=model, basis=whirl):
+        return residuals([x], combo, sweep, basis)[0]
 
     def warmed(x, combo):
         # every run of one local search continues the settled runs of its start: a
@@ -415,6 +419,16 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         return np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
     x0s = [(start_vector(s), combos[0]) for s in (starts or [None])]
+    # basins are probed and ranked in the channel basis and converged in the whirl
+    # basis: there a disk's backward whirl is trusted only to the nominal model's own,
+    # so a probe leads by where its ellipse happens to fall, and a rub's short runs
+    # from such probes stayed in a basin that the whirl basis itself scores worse than
+    # the one the channel basis leads to (docs/gap.md, *Why the rubs went*). A probe's
+    # cost is kept in both (one simulation); probes alone (max_nfev 0, a partner's
+    # score) are the whirl basis's, as a converged fit's cost is.
+    basin_basis = None
+    bases = (whirl,) if whirl is None else (whirl, None)
+    rank = 0 if max_nfev == 0 or whirl is None else 1
     j0 = len(NUISANCE) if probe_from is None else probe_from
     if classes and n_probe and j0 < len(lo):
         base = x0s[0][0]
@@ -432,15 +446,15 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             keys = [_probe_key(classes, combo, x) for x in points]
             if probe_cache is None or any(k not in probe_cache for k in keys):
                 sweep = warmed(base, combo)
-                for k, x, r in zip(keys, points, residuals(points, combo, sweep),
+                for k, x, f in zip(keys, points, simulated(points, combo, sweep),
                                    strict=True):
-                    cost = float(np.sum(r ** 2))
+                    costs = tuple(float(np.sum(compared(f, b) ** 2)) for b in bases)
                     if probe_cache is not None:
-                        probe_cache[k] = cost
-                    probes.append((cost, x, combo))
+                        probe_cache[k] = costs
+                    probes.append((costs[rank], x, combo))
             else:
-                probes += [(probe_cache[k], x, combo) for k, x in zip(keys, points,
-                                                                     strict=True)]
+                probes += [(probe_cache[k][rank], x, combo)
+                           for k, x in zip(keys, points, strict=True)]
         probes.sort(key=lambda p: p[0])
         # each discrete setting gets its own leading starts: a wrong station's probes
         # can all undercut the right one's before any local run (crack trial 5068: the
@@ -459,15 +473,16 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         cal = finish(x0, {}, float(np.sum(residual(x0, combo) ** 2)), False, combo)
         return [cal] if each_discrete else cal
 
-    def local(x0, nfev, combo, refresh=None, settled=None):
+    def local(x0, nfev, combo, refresh=None, settled=None, basis=whirl):
         sweep = warmed(x0, combo)
         if refresh is None and settled is None:
             return least_squares(residual, x0, bounds=(lo, hi), method="trf",
                                  x_scale=hi - lo, diff_step=diff_step, max_nfev=nfev,
-                                 args=(combo, sweep))
+                                 args=(combo, sweep, basis))
         # refresh 1: forward differences at every step, kept for the stop rule
-        jac = SecantJacobian(lambda x: residual(x, combo, sweep), lo, hi, diff_step,
-                             refresh or 1, many=lambda xs: residuals(xs, combo, sweep))
+        jac = SecantJacobian(lambda x: residual(x, combo, sweep, basis), lo, hi,
+                             diff_step, refresh or 1,
+                             many=lambda xs: residuals(xs, combo, sweep, basis))
         stop = SettledStop(jac, settled) if settled is not None else None
         res = least_squares(jac.residual, x0, jac=jac, bounds=(lo, hi), method="trf",
                             x_scale=hi - lo, max_nfev=nfev, callback=stop)
@@ -480,7 +495,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         # run from each of the leading starts, then the best of them runs to the end --
         # the best of each discrete setting: three iterations do not tell the stations
         # apart
-        short = [(local(x0, max(3, max_nfev // 4), combo, jacobian_refresh), combo)
+        short = [(local(x0, max(3, max_nfev // 4), combo, jacobian_refresh,
+                        basis=basin_basis), combo)
                  for x0, combo in x0s]
         best = [(min(runs, key=lambda r: r.cost), c) for c in combos
                 if (runs := [r for r, rc in short if rc is c])]
