@@ -315,7 +315,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     effect parameters from a scrambled Sobol sequence are scored first and the
     ``n_short`` best of them get short local runs, and the best of those is run to
     convergence: the 2x phase of a crack, say, is periodic in its angle, and the
-    cheapest probe, like local search alone, often sits in the wrong basin.
+    cheapest probe, like local search alone, often sits in the wrong basin. Where the
+    measured features carry a ``whirl_tol`` column, the probes and the short runs rank
+    basins in the channel basis and the converged run is the whirl basis's (see
+    :func:`~sknarx.gap.gapmap.compare`).
     ``probe_from`` (index into the search vector) restricts the probes to the
     trailing parameters -- a pair warm-started from its leading effect's fit probes
     only the partner. ``max_nfev=0`` returns the best probe without a local run.
@@ -426,9 +429,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     # the one the channel basis leads to (docs/gap.md, *Why the rubs went*). A probe's
     # cost is kept in both (one simulation); probes alone (max_nfev 0, a partner's
     # score) are the whirl basis's, as a converged fit's cost is.
-    basin_basis = None
     bases = (whirl,) if whirl is None else (whirl, None)
-    rank = 0 if max_nfev == 0 or whirl is None else 1
+    ranked_by = 0 if max_nfev == 0 or whirl is None else 1  # index into bases
     j0 = len(NUISANCE) if probe_from is None else probe_from
     if classes and n_probe and j0 < len(lo):
         base = x0s[0][0]
@@ -451,9 +453,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                     costs = tuple(float(np.sum(compared(f, b) ** 2)) for b in bases)
                     if probe_cache is not None:
                         probe_cache[k] = costs
-                    probes.append((costs[rank], x, combo))
+                    probes.append((costs[ranked_by], x, combo))
             else:
-                probes += [(probe_cache[k][rank], x, combo)
+                probes += [(probe_cache[k][ranked_by], x, combo)
                            for k, x in zip(keys, points, strict=True)]
         probes.sort(key=lambda p: p[0])
         # each discrete setting gets its own leading starts: a wrong station's probes
@@ -496,7 +498,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         # the best of each discrete setting: three iterations do not tell the stations
         # apart
         short = [(local(x0, max(3, max_nfev // 4), combo, jacobian_refresh,
-                        basis=basin_basis), combo)
+                        basis=None), combo)  # the channel basis ranks basins (above)
                  for x0, combo in x0s]
         best = [(min(runs, key=lambda r: r.cost), c) for c in combos
                 if (runs := [r for r, rc in short if rc is c])]
