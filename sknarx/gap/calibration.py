@@ -369,22 +369,22 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             warnings.simplefilter("ignore")
             return sweep.feature_arrays_many(speeds, points)
 
-    def compared(f, basis):
-        """One point's residual; ``basis``: the probe pairs' whirl layout, None for
-        the channel basis."""
+    def compared(f, bases):
+        """One point's residual in each of ``bases`` (the probe pairs' whirl layout,
+        None for the channel basis), its features projected once."""
         try:
             if isinstance(f, Exception):
                 raise f
             _, Sc, se_s, _ = f
             Sc, _ = project(Sc, se_s)
-            r = fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                              model_tol=tol, whirl=basis)
+            rs = [fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
+                                model_tol=tol, whirl=b) for b in bases]
         except (SimulationDivergenceError, ValueError, FloatingPointError):
-            r = np.full(size, 1e3)
-        return r if np.all(np.isfinite(r)) else np.full(size, 1e3)
+            rs = [np.full(size, 1e3) for _ in bases]
+        return [r if np.all(np.isfinite(r)) else np.full(size, 1e3) for r in rs]
 
     def residuals(xs, combo=combos[0], sweep=model, basis=whirl):
-        return [compared(f, basis) for f in simulated(xs, combo, sweep)]
+        return [compared(f, (basis,))[0] for f in simulated(xs, combo, sweep)]
 
     def residual(x, combo=combos[0], sweep=model, basis=whirl):
         return residuals([x], combo, sweep, basis)[0]
@@ -450,7 +450,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                 sweep = warmed(base, combo)
                 for k, x, f in zip(keys, points, simulated(points, combo, sweep),
                                    strict=True):
-                    costs = tuple(float(np.sum(compared(f, b) ** 2)) for b in bases)
+                    costs = tuple(float(np.sum(r ** 2)) for r in compared(f, bases))
                     if probe_cache is not None:
                         probe_cache[k] = costs
                     probes.append((costs[ranked_by], x, combo))
