@@ -9,8 +9,9 @@ only while the diagnosis code and search settings are unchanged).
 
 Trials come from ``plants.families`` (the same draw for every family: an effect or
 none, a pair, or one outside the library -- line pickup, a thermal bow relaxing over
-the sweep, a 7x gear mesh --, a per-element mismatch of stiffness, damping, contact
-stiffness and unbalance, SNR 20-40 dB, keyphasor jitter), 10 settled speed steps,
+the sweep, a 7x gear mesh, a cage fault at the cage's order --, a per-element
+mismatch of stiffness, damping, contact stiffness and unbalance, SNR 20-40 dB,
+keyphasor jitter), 10 settled speed steps,
 6 channels ``xO1 yO1 xA yA xB yB`` at 1 kHz. The families differ in everything but the draw:
 
 * ``own`` -- sknarx's simulator and effect kernels (the upper bound);

@@ -71,6 +71,24 @@ def test_second_derivation_crack_raises_the_two_x():
     assert two_crack > 5 * two_free
 
 
+def test_second_derivation_cage_fault_is_a_line_at_the_cage_order_on_its_bearing():
+    # the out-of-library cage fault must show where a probe can see it: at the cage's
+    # order (r_inner / (R_outer + r_inner), about 0.39x), on the journal it acts on
+    rotor, w = SecondRotor(), 150.0
+    order = rotor.r_inner / (rotor.R_outer + rotor.r_inner)
+
+    def line(rec, ch):
+        B = harmonic_basis(w * np.asarray(rec["t"]), [order, 1.0])
+        c = np.linalg.lstsq(B, np.asarray(rec[ch]), rcond=None)[0]
+        return abs(c[1] - 1j * c[2])
+
+    free = SecondDerivationPlant(rotor).run(w, n_samples=1000)
+    rotor.effects = {"cage-fault": [0, 50.0, 0.3]}  # at bearing A, 50 N
+    faulty = SecondDerivationPlant(rotor).run(w, n_samples=1000)
+    assert line(faulty, "xA") > 10 * line(free, "xA")
+    assert line(faulty, "xA") > 2 * line(faulty, "xB")
+
+
 def test_trials_are_the_same_draw_for_every_family_but_their_own_stream():
     a, b = draw_trial("crack", 7, "own"), draw_trial("crack", 7, "own")
     assert a == b

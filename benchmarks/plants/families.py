@@ -28,13 +28,13 @@ LIB = ["rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "
        "speed-fluctuation"]
 PAIRS = [("crack", "runout"), ("anisotropy", "runout"), ("clearance", "misalignment"),
          ("crack", "speed-fluctuation")]
-OUT = ["line-frequency", "thermal-bow", "gear-mesh"]
+OUT = ["line-frequency", "thermal-bow", "gear-mesh", "cage-fault"]
 MEASUREMENT = ("runout", "line-frequency")
 FAMILIES = ("own", "second", "ross")
-#: what a family cannot express: sknarx's simulator has no gear mesh (kept out of the
-#: own family, whose out-of-library effects are the line pickup and the thermal bow);
-#: ROSS has no joint looseness (see plants.ross_paper_rotor)
-UNSUPPORTED = {"own": {"gear-mesh"}, "second": set(), "ross": {"looseness"}}
+#: what a family cannot express: sknarx's simulator has no gear mesh and no cage fault
+#: (kept out of the own family, whose out-of-library effects are the line pickup and
+#: the thermal bow); ROSS has no joint looseness (see plants.ross_paper_rotor)
+UNSUPPORTED = {"own": {"gear-mesh", "cage-fault"}, "second": set(), "ross": {"looseness"}}
 
 
 def _log_uniform(rng, a, b):
@@ -77,6 +77,13 @@ def draw_effect(name, rng):
         return {"bow": u(5e-5, 2e-4), "angle": u(-np.pi, np.pi), "relax_steps": u(2.0, 8.0)}
     if name == "gear-mesh":
         return {"force": u(20.0, 100.0), "angle": u(-np.pi, np.pi)}
+    if name == "cage-fault":
+        # a damaged cage (a broken pocket, balls bunched) carries the bearing's load
+        # unevenly: a force turning with the cage, at its order (about 0.4x), on one
+        # bearing's journal -- a non-synchronous line locked to the shaft's order, which
+        # no library effect makes (the clearance's ball passage is nb times it)
+        return {"force": _log_uniform(rng, 10.0, 100.0), "angle": u(-np.pi, np.pi),
+                "at": str(rng.choice(["A", "B"]))}
     raise ValueError(f"unknown effect {name!r}")
 
 
@@ -189,6 +196,8 @@ def _second_sweep(truth, physical, settle, plant=None, speeds=None):
             eff[name] = [p["bow"], p["angle"]]
         elif name == "gear-mesh":
             eff[name] = [p["force"], p["angle"]]
+        elif name == "cage-fault":
+            eff[name] = [0 if p["at"] == "A" else 1, p["force"], p["angle"]]
     rotor.effects = eff
     return SecondDerivationPlant(rotor).sweep(speeds or SPEEDS, CHANNELS, settle=settle)
 

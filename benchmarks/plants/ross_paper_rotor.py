@@ -309,6 +309,11 @@ class RossPlant:
             g = p.faults["gear-mesh"]
             F[:, nd * NODE["O2"]] += g["force"] * np.cos(7 * phi + g["angle"])
             F[:, nd * NODE["O2"] + 1] += g["force"] * np.sin(7 * phi + g["angle"])
+        if "cage-fault" in p.faults:  # a force turning with the cage on journal A or B
+            c = p.faults["cage-fault"]
+            cage = p.r_inner / (p.R_outer + p.r_inner) * phi
+            F[:, nd * NODE[c["at"]]] += c["force"] * np.cos(cage + c["angle"])
+            F[:, nd * NODE[c["at"]] + 1] += c["force"] * np.sin(cage + c["angle"])
         if "misalignment" in self.faults:
             F += self.faults["misalignment"].compute_reaction_force(phi).T
         return F, phi

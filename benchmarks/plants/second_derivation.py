@@ -44,7 +44,9 @@ Effects, each written from its source (parameters in SI):
 * ``speed-fluctuation`` -- ``Omega (1 + a cos(w_f t + ph))``, ``t`` each record's time
   (the ripple's phase ``ph`` where a record starts).
 * out of library: ``thermal-bow`` (a bowed segment A-O1: a rotating force ``k1 bow``),
-  ``gear-mesh`` (a mesh force at 7x on disk O2, my own design).
+  ``gear-mesh`` (a mesh force at 7x on disk O2, my own design), ``cage-fault`` (a
+  force turning with the cage on journal A or B: a damaged cage carrying the load
+  unevenly, at the cage's order; also my own design).
 """
 
 from __future__ import annotations
@@ -164,7 +166,7 @@ class SecondRotor:
 
 # effect codes for the kernel (one parameter row each)
 _EFFECT_CODES = {"crack": 0, "rub": 1, "misalignment": 2, "looseness": 3,
-                 "speed-fluctuation": 4, "thermal-bow": 5, "gear-mesh": 6}
+                 "speed-fluctuation": 4, "thermal-bow": 5, "gear-mesh": 6, "cage-fault": 7}
 
 
 @njit(cache=True, nogil=True)
@@ -297,6 +299,11 @@ def _forces(t, q, v, w, scal, eff, f, ramp):  # pragma: no cover
             amp, ang = eff[r, 1], eff[r, 2]
             f[XO2] += amp * math.cos(7.0 * phi + ang)
             f[YO2] += amp * math.sin(7.0 * phi + ang)
+        elif code == 7:  # cage fault: a force turning with the cage on journal A or B
+            j = XA if eff[r, 1] == 0 else XB
+            amp, ang = eff[r, 2], eff[r, 3]
+            f[j] += amp * math.cos(cage + ang)
+            f[j + 1] += amp * math.sin(cage + ang)
 
 
 @njit(cache=True, nogil=True)
