@@ -51,7 +51,10 @@ DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "breadth_waive
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
-          "unexplained_out_of_library": "n_out_of_library"}
+          "unexplained_out_of_library": "n_out_of_library",
+          # secondary: the out-of-library trials no in-library fit matches within the
+          # noise floor (bench_gap_blind.within_noise_of_library)
+          "unexplained_out_of_library_beyond_library": "n_out_of_library_beyond_library"}
 COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 

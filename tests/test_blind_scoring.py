@@ -70,6 +70,26 @@ def test_an_effect_the_update_followed_is_not_separable():
     assert sc["top1"] == 0.0 and sc["n_singles_followed_by_update"] == 1
 
 
+def test_an_out_of_library_effect_a_library_fit_matches_within_noise_is_set_apart():
+    # a relaxing bow: past the update (e0 0.64) but a runout fit leaves 0.03 per feature,
+    # within the 0.33 floor -- named runout, and set apart as matched by the library; a
+    # 50 Hz line no fit comes near (best 120 per feature) stays in the secondary score
+    bow = {**_record("thermal-bow", {"thermal-bow": {}},
+                     [("runout", 0.96, 0.9, 0.03, {}), ("clearance", 0.2, 0.1, 0.5, {})],
+                     e0=0.64, effect_gap=7.3), "in_library": False}
+    line = {**_record("line-frequency", {"line-frequency": {}},
+                      [(["clearance", "runout"], 0.8, 0.3, 120.0, [{}, {}])],
+                      e0=900.0, effect_gap=900.0), "in_library": False}
+    assert blind.verdict(bow, S)[0] == "runout"
+    assert blind.verdict(line, S)[0] == "unexplained"
+    assert blind.within_noise_of_library(bow, S)
+    assert not blind.within_noise_of_library(line, S)
+    sc = blind.score([bow, line], S)
+    assert sc["unexplained_out_of_library"] == 0.5
+    assert sc["n_out_of_library_beyond_library"] == 1
+    assert sc["unexplained_out_of_library_beyond_library"] == 1.0
+
+
 def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
     # the disks sit 20 mm apart across a stiff joint: a rub's disk is often not decided
     # by the held-out speeds, and the diagnosis says so (setting_decided)
