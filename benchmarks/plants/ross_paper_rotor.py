@@ -309,11 +309,16 @@ class RossPlant:
             g = p.faults["gear-mesh"]
             F[:, nd * NODE["O2"]] += g["force"] * np.cos(7 * phi + g["angle"])
             F[:, nd * NODE["O2"] + 1] += g["force"] * np.sin(7 * phi + g["angle"])
-        if "cage-fault" in p.faults:  # a force turning with the cage on journal A or B
+        if "cage-fault" in p.faults:  # a force turning with the cage in bearing A or B,
+            # between journal and pedestal as the balls' own forces are
             c = p.faults["cage-fault"]
             cage = p.r_inner / (p.R_outer + p.r_inner) * phi
-            F[:, nd * NODE[c["at"]]] += c["force"] * np.cos(cage + c["angle"])
-            F[:, nd * NODE[c["at"]] + 1] += c["force"] * np.sin(cage + c["angle"])
+            fx, fy = c["force"] * np.cos(cage + c["angle"]), c["force"] * np.sin(cage + c["angle"])
+            i, j = nd * NODE[c["at"]], self.ped_dof[c["at"]]
+            F[:, i] += fx
+            F[:, i + 1] += fy
+            F[:, j] -= fx
+            F[:, j + 1] -= fy
         if "misalignment" in self.faults:
             F += self.faults["misalignment"].compute_reaction_force(phi).T
         return F, phi

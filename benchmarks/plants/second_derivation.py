@@ -45,8 +45,8 @@ Effects, each written from its source (parameters in SI):
   (the ripple's phase ``ph`` where a record starts).
 * out of library: ``thermal-bow`` (a bowed segment A-O1: a rotating force ``k1 bow``),
   ``gear-mesh`` (a mesh force at 7x on disk O2, my own design), ``cage-fault`` (a
-  force turning with the cage on journal A or B: a damaged cage carrying the load
-  unevenly, at the cage's order; also my own design).
+  force turning with the cage between journal and housing of bearing A or B: a damaged
+  cage carrying the load unevenly, at the cage's order; also my own design).
 """
 
 from __future__ import annotations
@@ -299,11 +299,16 @@ def _forces(t, q, v, w, scal, eff, f, ramp):  # pragma: no cover
             amp, ang = eff[r, 1], eff[r, 2]
             f[XO2] += amp * math.cos(7.0 * phi + ang)
             f[YO2] += amp * math.sin(7.0 * phi + ang)
-        elif code == 7:  # cage fault: a force turning with the cage on journal A or B
-            j = XA if eff[r, 1] == 0 else XB
+        elif code == 7:  # cage fault: a force turning with the cage in bearing A or B
+            # between journal and housing, as the balls' own forces are
+            j, hj = (XA, XHA) if eff[r, 1] == 0 else (XB, XHB)
             amp, ang = eff[r, 2], eff[r, 3]
-            f[j] += amp * math.cos(cage + ang)
-            f[j + 1] += amp * math.sin(cage + ang)
+            fx = amp * math.cos(cage + ang)
+            fy = amp * math.sin(cage + ang)
+            f[j] += fx
+            f[j + 1] += fy
+            f[hj] -= fx
+            f[hj + 1] -= fy
 
 
 @njit(cache=True, nogil=True)
