@@ -145,10 +145,17 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
     e_or, _ = feature_gap(measured, oracle, held)
     e_eff, n_eff = feature_gap(measured, free, held) if truth["effects"] else (0.0, 1)
     upd = d.get("nominal_update") or {}
+    # the held-out gap before any candidate per kind of feature (each order, each band
+    # of non-synchronous lines): what the update left where it has no parameters
+    # (harmonics, lines, a probe pair's ellipse) is read here, not in the mean alone
+    kinds = d.tables["before"].groupby("feature").agg(
+        excess=("excess", "mean"), z2=("z2", "mean"), n=("excess", "size"))
     return {
         "family": family, "kind": truth["kind"], "seed": seed,
         "in_library": truth["in_library"], "truth": truth,
         "e0": d["gap_before"]["per_feature"], "E0": E0, "n_features": n_feat,
+        "e0_by_kind": {k: {"excess": float(r.excess), "z2": float(r.z2), "n": int(r.n)}
+                       for k, r in kinds.iterrows()},
         "oracle_E": e_or, "oracle_shrink": 1 - e_or / E0 if E0 > 0 else 0.0,
         "effect_gap": e_eff / max(n_eff, 1),
         "ranking": [{"effect": r["effect"], "shrink": r["shrink"], "log_shrink": r["log_shrink"],
