@@ -77,10 +77,10 @@ def gate_applied():
 
     orig = blind.chosen
 
-    def chosen(rec, s):
+    def chosen(rec, s, rule=None):
         if rec.get("_gate"):
             return {**rec["_gate"], "heldout_gap_after": rec["_gate"]["E"]}
-        return orig(rec, s)
+        return orig(rec, s, rule)
 
     blind.chosen = chosen
     try:

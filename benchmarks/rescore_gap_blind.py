@@ -37,7 +37,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, table  # noqa: E402
-from bench_gap_blind import score, truth_label, verdict  # noqa: E402
+from bench_gap_blind import ByKind, score, truth_label, verdict  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -107,6 +107,20 @@ def frozen_thresholds(path, ap):
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
 
 
+def _secondary_rules(path):
+    """The report's secondary by-kind rules (:class:`bench_gap_blind.ByKind`) from its
+    kind floors and effect-free median; none where the run did not log its kinds."""
+    report = Path(path)
+    if not report.is_absolute():
+        report = Path(__file__).resolve().parent / report
+    floor = json.loads(report.read_text()).get("noise_floor", {})
+    floors = floor.get("kind_floors_z2")
+    if not floors:
+        return {}
+    return {"by_kind": ByKind(floors),
+            "by_kind_noise_referenced": ByKind(floors, floor["null_e0_median"])}
+
+
 def load(families, commit):
     """Each family's logged evaluation trials of ``commit`` (one per seed, the last
     logged), with each pair member's visibility from the member-gap cache."""
@@ -174,6 +188,13 @@ def main(argv=None):
             if a != b:
                 changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
                                 json.dumps(a), json.dumps(b)])
+    secondary = _secondary_rules(args.report)
+    for fam, recs in evals.items():
+        kinded = [r for r in recs if "e0_by_kind" in r]
+        for name, rule in secondary.items():
+            sc = score(kinded, frozen, rule)
+            counted += [[fam, f"{key} ({name})", f"{k}/{n}", f"{sc[key]:.2f}",
+                         f"{lo:.2f}-{hi:.2f}"] for key, k, n, lo, hi in intervals(sc)]
     print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")
     table(rows, ["family", "thresholds", "trials", *COLUMNS])
     print()

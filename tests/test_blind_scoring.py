@@ -6,6 +6,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -88,6 +89,48 @@ def test_an_out_of_library_effect_a_library_fit_matches_within_noise_is_set_apar
     assert sc["unexplained_out_of_library"] == 0.5
     assert sc["n_out_of_library_beyond_library"] == 1
     assert sc["unexplained_out_of_library_beyond_library"] == 1.0
+
+
+def _kinds(z2_2x, z2_1x=0.1):
+    """A logged trial's held-out mean z2 per kind of feature (24 features each)."""
+    z = {"1/2x": 0.8, "1x": z2_1x, "2x": z2_2x, "3x": 0.5, "nonsync >3.5x": 0.1}
+    return {k: {"excess": max(v - 1.0, 0.0), "z2": v, "n": 24} for k, v in z.items()}
+
+
+def test_the_by_kind_rule_sends_a_followed_sweep_to_the_candidates():
+    # a crack the update followed: 0.20 per feature (under the floor) but a 2x of mean
+    # z2 2.3; the crack removes 54 % of E0 -- under min_shrink, though all but the
+    # noise's share (0.112 per feature) of what is above it
+    crack = {**_record("crack", {"crack": {"station": "O2-B"}},
+                       [("crack", 0.54, 0.45, 0.092, {"station": "O2-B"}),
+                        ("misalignment", 0.25, 0.21, 0.15, {"at": "A"})], e0=0.2),
+             "E0": 20.0, "e0_by_kind": _kinds(2.3)}
+    quiet = {**_record("none", {}, [("clearance", 0.3, 0.2, 0.07, {})], e0=0.1),
+             "E0": 10.0, "kind": "none", "e0_by_kind": _kinds(0.9)}
+    floors = {"1x": 1.6, "2x": 1.6, "3x": 1.6}
+    assert blind.verdict(crack, S)[0] == "no-gap"  # the package's rule
+    assert blind.verdict(crack, S, blind.ByKind(floors))[0] == "unexplained"
+    assert blind.verdict(crack, S, blind.ByKind(floors, 0.112))[0] == "crack"
+    # an effect-free sweep under every floor stays no-gap under both
+    for rule in (blind.ByKind(floors), blind.ByKind(floors, 0.112)):
+        assert not rule.triggered(quiet)
+        assert blind.verdict(quiet, S, rule)[0] == "no-gap"
+    # and a sweep logged without its kinds is decided as the package decides it
+    old = {k: v for k, v in crack.items() if k != "e0_by_kind"}
+    assert blind.verdict(old, S, blind.ByKind(floors))[0] == "no-gap"
+
+
+def test_kind_floors_are_a_bonferroni_quantile_of_the_effect_free_trials():
+    rng = np.random.default_rng(3)
+    null = [{"e0_by_kind": {k: {"z2": float(v), "excess": 0.0, "n": 24}
+                            for k, v in zip(("1x", "2x", "3x"), rng.lognormal(-0.7, 0.4, 3),
+                                            strict=True)}} for _ in range(400)]
+    floors = blind.kind_floors(null)
+    # each kind's floor: the 1 - 0.01/3 quantile of a log-normal(-0.7, 0.4)
+    want = np.exp(-0.7 + 0.4 * 2.713)
+    assert floors == pytest.approx({"1x": want, "2x": want, "3x": want}, rel=0.06)
+    assert blind.kind_floors(null[:2]) is None
+    assert blind.kind_floors([{"e0": 0.1}] * 5) is None  # logged before the kinds were
 
 
 def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
