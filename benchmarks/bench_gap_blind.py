@@ -233,9 +233,10 @@ def names_of(effect):
 #: probe pair's 1x (its ellipse and speed-localised changes at a disk, which the
 #: axisymmetric update has no parameter for) and the harmonics. Stated 2026-11-27 from
 #: the 31000-35000 runs' development data, before the 37000 run was scored: there the
-#: update-followed cracks and misalignments carried 1.7-3.0 mean z2 on their 2x and an
-#: anisotropy 3.0 on its 1x against at most 1.0 on 20 effect-free own trials and 0.2
-#: on 11 effect-free trials of the independent plants (docs/gap.md)
+#: update-followed cracks and misalignments carried 1.8-3.0 mean z2 on their 2x and an
+#: anisotropy 3.0 on its 1x, against at most 1.02 on either kind on 20 effect-free own
+#: trials and 1.01 (2x), 0.54 (1x) on 35 effect-free trials of the independent plants
+#: (docs/gap.md, *The update-followed misses by kind of feature*)
 KIND_TESTED = ("1x", "2x", "3x")
 
 
