@@ -29,6 +29,9 @@ trials, shrink against the oracle (the plant itself with every withheld effect, 
 noise), the confusion matrix, and on effect-free trials the nominal updates found.
 An effect is *detectable* when it moves the measurement by more than the noise floor
 (held-out excess per feature of the measurement against the same plant without it).
+Beside them, never instead, the report scores secondary rules on the same logs: the
+by-kind detection (:class:`ByKind`, its floors from this run's null trials) under
+``secondary_rules``.
 """
 
 from __future__ import annotations
