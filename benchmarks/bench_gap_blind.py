@@ -239,7 +239,7 @@ def names_of(effect):
 #: update-followed cracks and misalignments carried 1.8-3.0 mean z2 on their 2x and an
 #: anisotropy 3.0 on its 1x, against at most 1.02 on either kind on 20 effect-free own
 #: trials and 1.01 (2x), 0.54 (1x) on 35 effect-free trials of the independent plants
-#: (docs/gap.md, *The update-followed misses by kind of feature*)
+#: (docs/gap_validation.md, *The update-followed misses by kind of feature*)
 KIND_TESTED = ("1x", "2x", "3x")
 
 

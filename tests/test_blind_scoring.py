@@ -153,7 +153,7 @@ def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
 def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_threshold(capsys):
     """``benchmarks/rescore_gap_blind.py`` on the committed 25000 run: unchanged
     thresholds give the committed report's scores; a lower pair trigger changes the
-    verdicts its analysis in docs/gap.md names; a search setting is refused."""
+    verdicts its analysis in docs/gap_validation.md names; a search setting is refused."""
     import json
 
     import rescore_gap_blind as rescore
@@ -181,8 +181,8 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
 
 def test_the_breadth_waiver_decided_again_on_a_logged_run(capsys):
     """The breadth waiver (``breadth_waived_at_floor``) on the 16000 run's logs, decided
-    before it existed: it names the one trial docs/gap.md names (the second plant's
-    misalignment 16020, left below the floor by a misalignment with log shrink 0.26);
+    before it existed: it names the one trial docs/gap_validation.md names (the second
+    plant's misalignment 16020, left below the floor by a misalignment with log shrink 0.26);
     a value that is not True or False is one argparse error."""
     import rescore_gap_blind as rescore
 

@@ -426,9 +426,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     # basis: there a disk's backward whirl is trusted only to the nominal model's own,
     # so a probe leads by where its ellipse happens to fall, and a rub's short runs
     # from such probes stayed in a basin that the whirl basis itself scores worse than
-    # the one the channel basis leads to (docs/gap.md, *Why the rubs went*). A probe's
-    # cost is kept in both (one simulation); probes alone (max_nfev 0, a partner's
-    # score) are the whirl basis's, as a converged fit's cost is.
+    # the one the channel basis leads to (docs/gap_validation.md, *Why the rubs
+    # went*). A probe's cost is kept in both (one simulation); probes alone (max_nfev
+    # 0, a partner's score) are the whirl basis's, as a converged fit's cost is.
     bases = (whirl,) if whirl is None else (whirl, None)
     ranked_by = 0 if max_nfev == 0 or whirl is None else 1  # index into bases
     j0 = len(NUISANCE) if probe_from is None else probe_from
