@@ -204,9 +204,9 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     runup = runup_rate(rows) if mode != "steady" else None
     crit = meas_cfg.get("first_critical_rpm")
     model = OrderModel(rotor, probe)
-    cal = info["calibration"]
-    bounds = (tuple(cal.get("bearing_stiffness", (1e5, 1e8))),
-              tuple(cal.get("bearing_damping", (1.0, 2000.0))))
+    limits = info["calibration"]
+    bounds = (tuple(limits.get("bearing_stiffness", (1e5, 1e8))),
+              tuple(limits.get("bearing_damping", (1.0, 2000.0))))
     z, se, sp = bins.z.to_numpy(), bins.se.to_numpy(), bins.speed.to_numpy()
     b0 = rotor.bearings[0]
 
@@ -217,34 +217,20 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     def heldout(z2):
         return float(np.clip(z2[held] - 2, 0, None).sum())
 
+    def nominal_excess(m, p):
+        """Held-out excess of the effect-free rotor at bearings ``p`` on order model ``m``."""
+        s_all = predict(m, nominal, p, sp[train], z[train], se[train], sp)[1]
+        return heldout(z2_of(z, s_all, se))
+
     # the nominal model exactly as described (only the unbalance fitted)
     nominal = Candidate(False, False)
     p_nom = np.log10([b0.kxx, b0.cxx])
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
-    # calibrating the uncertain nominal values (isotropic bearing stiffness, damping)
     logger.info("%d revolutions in %d speed bins; calibrating the nominal rotor (steady "
                 "response)", len(rows), n)
-    p_cal, sd_cal = fit_bearings(model, nominal, bins, train, bounds)
-    sweep_note, base_choice = None, None
-    if runup is not None:
-        # a fast run-up is not a sequence of steady states: simulate it when the
-        # calibrated rotor says the sweep is not slow (the quasi-steady model is still
-        # calibrated, for the report's comparison)
-        k0, c0 = 10 ** p_cal[0], 10 ** p_cal[1]
-        runup["sweep"] = sweep_parameter(rotor.with_bearings(kxx=k0, kyy=k0, cxx=c0, cyy=c0),
-                                         runup["rate_rpm_s"])
-        if mode == "run-up" or runup["sweep"]["sweep_parameter"] >= SWEEP_LIMIT:
-            steady_model, p_steady = model, (p_cal, sd_cal)
-            E_steady = heldout(evaluate(nominal, p_cal)[3])
-            model = OrderModel(rotor, probe, runup)
-            logger.info("run-up at %.0f rpm/s is not quasi-steady (sweep parameter %.2f): "
-                        "calibrating the simulated, order-tracked run-up", runup["rate_rpm_s"],
-                        runup["sweep"]["sweep_parameter"])
-            p_cal, sd_cal = fit_bearings(model, nominal, bins, train, bounds)
-            E_runup = heldout(evaluate(nominal, p_cal)[3])
-            base_choice = {"run-up model": E_runup, "quasi-steady model": E_steady}
-        else:
-            sweep_note, runup = runup, None
+    cal = _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds,
+                               nominal, nominal_excess)
+    model, p_cal, sd_cal, runup = cal["model"], cal["p"], cal["sd"], cal["runup"]
     coef_cal, s_cal, kcs_cal, z2_cal = evaluate(nominal, p_cal)
     cmp0 = _comparison(bins, z, s_cal, se, held, channel)
     E_before = float(cmp0["excess"].sum())
@@ -266,48 +252,8 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
                                se=se, held=held, noisy_rpm=noisy)
     s_best = front.curves[json.dumps(best["effect"])]
     z2_best = z2_of(z, s_best, se)
-    response = {"kind": "steady-state order response"}
-    if sweep_note is not None:
-        response.update(sweep=sweep_note["sweep"], rate_rpm_s=sweep_note["rate_rpm_s"],
-                        why="the run-up is slow enough to be quasi-steady (sweep parameter "
-                        f"{sweep_note['sweep']['sweep_parameter']:.3f} < {SWEEP_LIMIT})")
-    s_quasi = None
-    until = None
-    if runup is not None:
-        until, _ = transient_end_rpm(_rotor_of(rotor, best["params"]), runup["rpm_start"],
-                                     runup["rpm_end"], runup["rate_rpm_s"], TRANSIENT_TOL)
-        # the same verdict on a quasi-steady model: how much the sweep itself matters
-        cand_best = best["_fit"].state[0]
-        logger.info("the verdict on a quasi-steady model, for comparison")
-        # started from the quasi-steady calibration, not the run-up one
-        p_q, _ = fit_bearings(steady_model, cand_best, bins, train, bounds,
-                              start=(p_steady[0][0], p_steady[0][1]))
-        _, s_quasi, _ = predict(steady_model, cand_best, p_q, sp[train], z[train], se[train],
-                                sp)
-        E_q = heldout(z2_of(z, s_quasi, se))
-        f_n = float(crit_cal[0] / RPM)
-        alpha = runup["rate_rpm_s"] * RPM
-        beat = [f_n + np.sqrt((2 * m + 1) * 2 * np.pi * alpha) / RPM for m in range(4)]
-        response = {
-            "kind": "order-tracked run-up simulation",
-            "why": "set by the rotor file" if mode == "run-up" else
-                   "the record is a ramp; with the rotor calibrated as quasi-steady, the "
-                   "sweep parameter alpha/(zeta^2 w_n^2) at the first mode is "
-                   f"{runup['sweep']['sweep_parameter']:.2f} (>= {SWEEP_LIMIT}: not slow)",
-            "transient_tolerance": TRANSIENT_TOL,
-            "sweep": runup["sweep"],
-            "rate_rpm_s": runup["rate_rpm_s"],
-            "simulated_rpm": [runup["rpm_start"], until],
-            "steady_above_rpm": until,
-            "verdict_heldout_excess": {"run-up model": best["heldout_gap_after"],
-                                       "quasi-steady model": E_q},
-            "beat_minima_expected_rpm": beat,
-            "measured_minima_rpm": _local_minima(bins, f_n, beat[-1] + 40),
-            "beat": _beat_comparison(bins, s_best, s_quasi, f_n, beat, min(noisy, until)),
-        }
-    if base_choice is not None:
-        # both calibrated, no effect added: what the sweep alone is worth on held-out bins
-        response["nominal_heldout_excess"] = base_choice
+    response, s_quasi, until = _response_model(rotor, best, s_best, cal, mode, bins, train,
+                                               bounds, crit_cal, noisy, z, se, sp, heldout)
     where = _regions(bins, z, s_cal, se, noisy, channel)
     doc = {
         "verdict": None,
@@ -345,7 +291,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     modes = _verdict_modes(rotor, best)
     doc["critical_speeds_rpm"] = sorted(m["rpm"] for m in modes)
     doc["modes"] = modes
-    sweep_info = (runup or sweep_note or {})
+    sweep_info = (runup or cal["sweep_note"] or {})
     if sweep_info:  # each mode of the verdict's rotor has its own decay time to compare
         alpha = sweep_info["rate_rpm_s"] * RPM
         for m in modes:
@@ -367,6 +313,90 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     base = rotor.with_bearings(kxx=kcs_cal[0], kyy=kcs_cal[0], cxx=kcs_cal[2], cyy=kcs_cal[2])
     return GapDiagnosis(doc, front_end="order-domain", base=base, curves=curves,
                         tables={"before": cmp0, "after": best["_cmp"]})
+
+
+def _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds, nominal,
+                         nominal_excess) -> dict:
+    """The nominal rotor's bearings calibrated on the training bins, and which response
+    model they were calibrated on.
+
+    A fast run-up is not a sequence of steady states: it is simulated (``mode``
+    ``'run-up'``, or ``'auto'`` when the quasi-steady calibration's sweep parameter
+    reaches :data:`SWEEP_LIMIT`), and the quasi-steady calibration is kept for the
+    report's comparison. Returns the order model, the calibrated log10 bearings ``p``
+    and their std ``sd``, ``runup`` (None unless simulated), ``sweep_note`` (a run-up
+    found quasi-steady), ``steady`` (the quasi-steady model and calibration where the
+    run-up is simulated) and ``base_choice`` (both models' effect-free held-out excess).
+    """
+    p_cal, sd_cal = fit_bearings(model, nominal, bins, train, bounds)
+    out = {"model": model, "p": p_cal, "sd": sd_cal, "runup": runup, "sweep_note": None,
+           "steady": None, "base_choice": None}
+    if runup is None:
+        return out
+    k0, c0 = 10 ** p_cal[0], 10 ** p_cal[1]
+    runup["sweep"] = sweep_parameter(rotor.with_bearings(kxx=k0, kyy=k0, cxx=c0, cyy=c0),
+                                     runup["rate_rpm_s"])
+    if mode != "run-up" and runup["sweep"]["sweep_parameter"] < SWEEP_LIMIT:
+        return {**out, "sweep_note": runup, "runup": None}
+    E_steady = nominal_excess(model, p_cal)
+    swept = OrderModel(rotor, probe, runup)
+    logger.info("run-up at %.0f rpm/s is not quasi-steady (sweep parameter %.2f): "
+                "calibrating the simulated, order-tracked run-up", runup["rate_rpm_s"],
+                runup["sweep"]["sweep_parameter"])
+    p_run, sd_run = fit_bearings(swept, nominal, bins, train, bounds)
+    return {**out, "model": swept, "p": p_run, "sd": sd_run, "steady": (model, p_cal),
+            "base_choice": {"run-up model": nominal_excess(swept, p_run),
+                            "quasi-steady model": E_steady}}
+
+
+def _response_model(rotor, best, s_best, cal, mode, bins, train, bounds, crit_cal, noisy,
+                    z, se, sp, heldout):
+    """The document's ``response_model``, the verdict's quasi-steady curve (None unless
+    the run-up was simulated) and the speed (rpm) above which the run-up is steady
+    (None likewise)."""
+    runup, sweep_note = cal["runup"], cal["sweep_note"]
+    if runup is None:
+        response = {"kind": "steady-state order response"}
+        if sweep_note is not None:
+            response.update(
+                sweep=sweep_note["sweep"], rate_rpm_s=sweep_note["rate_rpm_s"],
+                why="the run-up is slow enough to be quasi-steady (sweep parameter "
+                f"{sweep_note['sweep']['sweep_parameter']:.3f} < {SWEEP_LIMIT})")
+        return response, None, None
+    until, _ = transient_end_rpm(_rotor_of(rotor, best["params"]), runup["rpm_start"],
+                                 runup["rpm_end"], runup["rate_rpm_s"], TRANSIENT_TOL)
+    # the same verdict on a quasi-steady model: how much the sweep itself matters
+    cand_best = best["_fit"].state[0]
+    logger.info("the verdict on a quasi-steady model, for comparison")
+    steady_model, p_steady = cal["steady"]
+    # started from the quasi-steady calibration, not the run-up one
+    p_q, _ = fit_bearings(steady_model, cand_best, bins, train, bounds,
+                          start=(p_steady[0], p_steady[1]))
+    _, s_quasi, _ = predict(steady_model, cand_best, p_q, sp[train], z[train], se[train], sp)
+    E_q = heldout(z2_of(z, s_quasi, se))
+    f_n = float(crit_cal[0] / RPM)
+    alpha = runup["rate_rpm_s"] * RPM
+    beat = [f_n + np.sqrt((2 * m + 1) * 2 * np.pi * alpha) / RPM for m in range(4)]
+    response = {
+        "kind": "order-tracked run-up simulation",
+        "why": "set by the rotor file" if mode == "run-up" else
+               "the record is a ramp; with the rotor calibrated as quasi-steady, the "
+               "sweep parameter alpha/(zeta^2 w_n^2) at the first mode is "
+               f"{runup['sweep']['sweep_parameter']:.2f} (>= {SWEEP_LIMIT}: not slow)",
+        "transient_tolerance": TRANSIENT_TOL,
+        "sweep": runup["sweep"],
+        "rate_rpm_s": runup["rate_rpm_s"],
+        "simulated_rpm": [runup["rpm_start"], until],
+        "steady_above_rpm": until,
+        "verdict_heldout_excess": {"run-up model": best["heldout_gap_after"],
+                                   "quasi-steady model": E_q},
+        "beat_minima_expected_rpm": beat,
+        "measured_minima_rpm": _local_minima(bins, f_n, beat[-1] + 40),
+        "beat": _beat_comparison(bins, s_best, s_quasi, f_n, beat, min(noisy, until)),
+        # both calibrated, no effect added: what the sweep alone is worth on held-out bins
+        "nominal_heldout_excess": cal["base_choice"],
+    }
+    return response, s_quasi, until
 
 
 def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=SIGNIFICANT_Z2,
