@@ -255,7 +255,9 @@ class ByKind:
     (``floors``, :func:`kind_floors`). With ``noise_per_feature`` (the effect-free
     trials' median excess per feature) each candidate's shrink is measured against the
     excess above what an effect-free sweep carries, ``(E0 - E) / (E0 - n m0)``: no
-    candidate removes the noise, and on a sweep near the floor it is a third of E0."""
+    candidate removes the noise, and on a sweep near the floor it is a third of E0 (so
+    that variant's shrink against the oracle, whose shrink is the plain one, reads
+    high: its rates are what it is scored on)."""
 
     floors: dict
     noise_per_feature: float | None = None
