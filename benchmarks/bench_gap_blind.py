@@ -275,11 +275,16 @@ def kind_floors(null, alpha=0.01):
     if len(recs) < 3:
         return None
     q = 1.0 - alpha / len(KIND_TESTED)
-    out = {}
-    for k in KIND_TESTED:
-        z = np.log([max(r["e0_by_kind"][k]["z2"], 1e-12) for r in recs])
-        out[k] = float(np.exp(z.mean() + stats.norm.ppf(q) * z.std(ddof=1)))
-    return out
+    return {k: lognormal_quantile([max(r["e0_by_kind"][k]["z2"], 1e-12) for r in recs], q)
+            for k in KIND_TESTED}
+
+
+def secondary_rules(floors, null_median):
+    """The report's secondary rules by name: the by-kind detection alone and with the
+    shrink referenced to the effect-free median (:class:`ByKind`); none without floors."""
+    if not floors:
+        return {}
+    return {"by_kind": ByKind(floors), "by_kind_noise_referenced": ByKind(floors, null_median)}
 
 
 def chosen(rec, s, rule=None):
@@ -493,11 +498,16 @@ GRID = {"min_shrink": [0.5, 0.6, 0.7, 0.8],
         "pair_gain": [0.3, 0.5, 0.7]}
 
 
+def lognormal_quantile(values, q):
+    """The ``q`` quantile of a log-normal fitted to positive, skewed ``values``."""
+    z = np.log(values)
+    return float(np.exp(z.mean() + stats.norm.ppf(q) * z.std(ddof=1)))
+
+
 def noise_floor(null, alpha=0.01):
     """The no-gap threshold: the ``1 - alpha`` quantile of the held-out excess per
     feature of effect-free trials (log-normal fit: the excess is positive and skewed)."""
-    z = np.log([r["e0"] for r in null])
-    return float(np.exp(z.mean() + stats.norm.ppf(1.0 - alpha) * z.std(ddof=1)))
+    return lognormal_quantile([r["e0"] for r in null], 1.0 - alpha)
 
 
 def fit_thresholds(pilot, base):
@@ -637,9 +647,7 @@ def main():
     # the secondary by-kind rules (ByKind), on the trials that logged their kinds
     floors = kind_floors(null)
     null_median = float(np.median([r["e0"] for r in null]))
-    rules = ({"by_kind": ByKind(floors),
-              "by_kind_noise_referenced": ByKind(floors, null_median)}
-             if floors is not None else {})
+    rules = secondary_rules(floors, null_median)
     per_family = {}
     rows = []
     for fam, recs in evals.items():
@@ -647,14 +655,13 @@ def main():
         times = [r["seconds"] for r in recs]
         sc["median_seconds"] = float(np.median(times)) if times else float("nan")
         kinded = [r for r in recs if "e0_by_kind" in r]
-        secondary = {name: {**score(kinded, frozen, rule),
-                            "confusion": confusion(kinded, frozen, rule),
-                            "changed": [{"seed": r["seed"], "truth": truth_label(r, frozen),
-                                         "frozen": verdict(r, frozen)[0],
-                                         name: verdict(r, frozen, rule)[0]}
-                                        for r in kinded if verdict(r, frozen)[0]
-                                        != verdict(r, frozen, rule)[0]]}
-                     for name, rule in rules.items()}
+        secondary = {}
+        for name, rule in rules.items():
+            decided = [(r, verdict(r, frozen)[0], verdict(r, frozen, rule)[0]) for r in kinded]
+            secondary[name] = {
+                **score(kinded, frozen, rule), "confusion": confusion(kinded, frozen, rule),
+                "changed": [{"seed": r["seed"], "truth": truth_label(r, frozen),
+                             "frozen": a, name: b} for r, a, b in decided if a != b]}
         per_family[fam] = {"scores": sc, "secondary_rules": secondary,
                            "confusion": confusion(recs, frozen),
                            "updates_on_effect_free": updates_on_effect_free(recs),

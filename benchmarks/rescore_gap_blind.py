@@ -37,7 +37,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, table  # noqa: E402
-from bench_gap_blind import ByKind, score, truth_label, verdict  # noqa: E402
+from bench_gap_blind import score, secondary_rules, truth_label, verdict  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -90,35 +90,28 @@ def intervals(sc):
     return out
 
 
-def frozen_thresholds(path, ap):
-    """The frozen thresholds of a ``bench_gap_blind`` JSON report (``path`` relative to
-    ``benchmarks/`` unless absolute); an unreadable report is ``ap``'s error line."""
+def _report(path, ap):
+    """A ``bench_gap_blind`` JSON report (``path`` relative to ``benchmarks/`` unless
+    absolute); an unreadable one, or one without thresholds, is ``ap``'s error line."""
     report = Path(path)
     if not report.is_absolute():
         report = Path(__file__).resolve().parent / report
     try:
-        thresholds = json.loads(report.read_text())["thresholds"]
+        doc = json.loads(report.read_text())
+        doc["thresholds"]
     except (OSError, ValueError, KeyError) as exc:
         ap.error(f"cannot read the thresholds of {report} ({exc}); give a "
                  "bench_gap_blind JSON report")
+    return doc
+
+
+def frozen_thresholds(path, ap):
+    """The frozen thresholds of a ``bench_gap_blind`` JSON report (see :func:`_report`)."""
+    thresholds = _report(path, ap)["thresholds"]
     known = {f.name for f in fields(DiagnosisSettings)}
     # a report written before the breadth waiver existed was decided without it
     thresholds.setdefault("breadth_waived_at_floor", False)
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
-
-
-def _secondary_rules(path):
-    """The report's secondary by-kind rules (:class:`bench_gap_blind.ByKind`) from its
-    kind floors and effect-free median; none where the run did not log its kinds."""
-    report = Path(path)
-    if not report.is_absolute():
-        report = Path(__file__).resolve().parent / report
-    floor = json.loads(report.read_text()).get("noise_floor", {})
-    floors = floor.get("kind_floors_z2")
-    if not floors:
-        return {}
-    return {"by_kind": ByKind(floors),
-            "by_kind_noise_referenced": ByKind(floors, floor["null_e0_median"])}
 
 
 def load(families, commit):
@@ -188,7 +181,8 @@ def main(argv=None):
             if a != b:
                 changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
                                 json.dumps(a), json.dumps(b)])
-    secondary = _secondary_rules(args.report)
+    floor = _report(args.report, ap).get("noise_floor", {})
+    secondary = secondary_rules(floor.get("kind_floors_z2"), floor.get("null_e0_median"))
     for fam, recs in evals.items():
         kinded = [r for r in recs if "e0_by_kind" in r]
         for name, rule in secondary.items():
