@@ -210,8 +210,8 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     z, se, sp = bins.z.to_numpy(), bins.se.to_numpy(), bins.speed.to_numpy()
     b0 = rotor.bearings[0]
 
-    def evaluate(cand, p):
-        coef, s_all, kcs = predict(model, cand, p, sp[train], z[train], se[train], sp)
+    def evaluate(cand, p, on=None):
+        coef, s_all, kcs = predict(on or model, cand, p, sp[train], z[train], se[train], sp)
         return coef, s_all, kcs, z2_of(z, s_all, se)
 
     def heldout(z2):
@@ -219,8 +219,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
 
     def nominal_excess(m, p):
         """Held-out excess of the effect-free rotor at bearings ``p`` on order model ``m``."""
-        s_all = predict(m, nominal, p, sp[train], z[train], se[train], sp)[1]
-        return heldout(z2_of(z, s_all, se))
+        return heldout(evaluate(nominal, p, m)[3])
 
     # the nominal model exactly as described (only the unbalance fitted)
     nominal = Candidate(False, False)
