@@ -29,8 +29,9 @@ trials, shrink against the oracle (the plant itself with every withheld effect, 
 noise), the confusion matrix, and on effect-free trials the nominal updates found.
 An effect is *detectable* when it moves the measurement by more than the noise floor
 (held-out excess per feature of the measurement against the same plant without it).
-Beside them, never instead, the report scores secondary rules on the same logs: the
-by-kind detection (:class:`ByKind`, its floors from this run's null trials) under
+The package's per-order floors (``order_floors_z2``) are refitted on the null trials
+like the noise floor (:func:`kind_floors`). Beside the scores, never instead, the report
+scores secondary rules on the same logs (:class:`NoiseReferencedShrink`) under
 ``secondary_rules``.
 """
 
@@ -61,7 +62,7 @@ from plants.families import (  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
-from sknarx.gap.core import decide  # noqa: E402
+from sknarx.gap.core import TESTED_ORDERS, decide, orders_over_floor  # noqa: E402
 from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
@@ -232,74 +233,62 @@ def names_of(effect):
     return (effect,) if isinstance(effect, str) else tuple(effect)
 
 
-#: the kinds of held-out feature the by-kind rule tests on its own (:class:`ByKind`): a
-#: probe pair's 1x (its ellipse and speed-localised changes at a disk, which the
-#: axisymmetric update has no parameter for) and the harmonics. Stated 2026-11-27 from
-#: the 31000-35000 runs' development data, before the 37000 run was scored: there the
-#: update-followed cracks and misalignments carried 1.8-3.0 mean z2 on their 2x and an
-#: anisotropy 3.0 on its 1x, against at most 1.02 on either kind on 20 effect-free own
-#: trials and 1.01 (2x), 0.54 (1x) on 35 effect-free trials of the independent plants
-#: (docs/gap_validation.md, *The update-followed misses by kind of feature*)
-KIND_TESTED = ("1x", "2x", "3x")
-
-
 @dataclass(frozen=True)
-class ByKind:
-    """A secondary verdict rule, scored beside the package's and never instead of it.
+class NoiseReferencedShrink:
+    """A secondary verdict rule, scored beside the package's and never instead of it:
+    each candidate's shrink measured against the excess above what an effect-free
+    sweep carries, ``(E0 - E) / (E0 - n m0)`` with ``m0`` the effect-free trials' median
+    excess per feature (``noise_per_feature``). No candidate removes the noise, and on
+    a sweep sent to the candidates by one order alone
+    (:func:`sknarx.gap.core.orders_over_floor`), under the floor, it is a third of E0;
+    so this rule's shrink against the oracle (whose shrink is the plain one) reads high:
+    its rates are what it is scored on. Stated 2026-11-27 with the by-kind detection,
+    before the 37000 run (docs/gap_validation.md, *The update-followed misses by kind
+    of feature*)."""
 
-    The package calls a sweep effect-free when its held-out excess per feature is under
-    the floor, a mean over every feature: an effect the nominal update followed except
-    in one kind of feature (a crack's 2x) is diluted by the others. Here a sweep under
-    the floor still goes to the candidates, decided by the frozen rule as one above it,
-    when the mean z2 of one :data:`KIND_TESTED` kind exceeds that kind's floor
-    (``floors``, :func:`kind_floors`). With ``noise_per_feature`` (the effect-free
-    trials' median excess per feature) each candidate's shrink is measured against the
-    excess above what an effect-free sweep carries, ``(E0 - E) / (E0 - n m0)``: no
-    candidate removes the noise, and on a sweep near the floor it is a third of E0 (so
-    that variant's shrink against the oracle, whose shrink is the plain one, reads
-    high: its rates are what it is scored on)."""
-
-    floors: dict
-    noise_per_feature: float | None = None
-
-    def triggered(self, rec) -> bool:
-        kinds = rec.get("e0_by_kind") or {}
-        return any(kinds[k]["z2"] > f for k, f in self.floors.items() if k in kinds)
+    noise_per_feature: float
 
 
 def kind_floors(null, alpha=0.01):
-    """Each :data:`KIND_TESTED` kind's floor: the ``1 - alpha / 3`` quantile (log-normal
-    fit, Bonferroni over the three kinds) of the effect-free trials' mean z2 over that
-    kind's held-out features; None with fewer than three trials that logged it."""
+    """Each tested order's floor (:data:`sknarx.gap.core.TESTED_ORDERS`): the
+    ``1 - alpha / 3`` quantile (log-normal fit, Bonferroni over the three orders) of the
+    effect-free trials' mean z2 over that order's held-out features; None with fewer
+    than three trials that logged it. The package's ``order_floors_z2`` is frozen from
+    these, and each run refits them on its own null trials as it does the noise floor."""
     recs = [r for r in null if "e0_by_kind" in r]
     if len(recs) < 3:
         return None
-    q = 1.0 - alpha / len(KIND_TESTED)
+    q = 1.0 - alpha / len(TESTED_ORDERS)
     return {k: lognormal_quantile([max(r["e0_by_kind"][k]["z2"], 1e-12) for r in recs], q)
-            for k in KIND_TESTED}
+            for k in TESTED_ORDERS}
 
 
-def secondary_rules(floors, null_median):
-    """The report's secondary rules by name: the by-kind detection alone and with the
-    shrink referenced to the effect-free median (:class:`ByKind`); none without floors."""
-    if not floors:
+def secondary_rules(null_median):
+    """The report's secondary rules by name (:class:`NoiseReferencedShrink`); none
+    without the effect-free median."""
+    if null_median is None:
         return {}
-    return {"by_kind": ByKind(floors), "by_kind_noise_referenced": ByKind(floors, null_median)}
+    return {"noise_referenced_shrink": NoiseReferencedShrink(null_median)}
+
+
+def orders_over(rec, s):
+    """The orders over their floor (:func:`sknarx.gap.core.orders_over_floor`) of a
+    logged trial; none for a trial logged before its orders were (decided then as the
+    package decided it)."""
+    by_kind = rec.get("e0_by_kind") or {}
+    return orders_over_floor({k: v["z2"] for k, v in by_kind.items()}, s)
 
 
 def chosen(rec, s, rule=None):
     """The frozen rule's choice on a logged trial: ``'no-gap'``, None (unexplained) or
-    the chosen ranking entry; with ``rule`` (:class:`ByKind`), that rule's."""
+    the chosen ranking entry; with ``rule`` (:class:`NoiseReferencedShrink`), that
+    rule's."""
     ranking = [{**r, "heldout_gap_after": r["E"]} for r in rec["ranking"]]
-    e0 = rec["e0"]
     if rule is not None:
-        if rule.triggered(rec):
-            e0 = np.inf  # decided as a sweep above the floor would be
-        if rule.noise_per_feature is not None:
-            base = rec["E0"] - rule.noise_per_feature * rec["n_features"]
-            ranking = [{**r, "shrink": (rec["E0"] - r["E"]) / base if base > 0
-                        else r["shrink"]} for r in ranking]
-    return decide(e0, ranking, s, rec["n_features"])
+        base = rec["E0"] - rule.noise_per_feature * rec["n_features"]
+        ranking = [{**r, "shrink": (rec["E0"] - r["E"]) / base if base > 0
+                    else r["shrink"]} for r in ranking]
+    return decide(rec["e0"], ranking, s, rec["n_features"], orders_over(rec, s))
 
 
 def verdict(rec, s, rule=None):
@@ -618,7 +607,8 @@ def main():
     base = replace(DiagnosisSettings(), pair_trigger=0.2)
     print("null trials (noise floor, own family)", flush=True)
     null = run([(None, 2000 + i) for i in range(args.null)], "null", "own",
-               replace(base, no_gap_per_feature=np.inf), shard, args.report_only,
+               replace(base, no_gap_per_feature=np.inf, order_floors_z2=None), shard,
+               args.report_only,
                exhaustive=False)
     print("pilot trials (threshold fitting, own family)", flush=True)
     pilot = run(plan(args.pilot, 1000, "own"), "pilot", "own", base, shard, args.report_only)
@@ -635,31 +625,34 @@ def main():
         print("not enough null trials logged to set the noise floor")
         return
     floor = noise_floor(null)
+    # the per-order floors too, where the null trials logged their orders (else the
+    # package's frozen ones)
+    floors = kind_floors(null)
+    refit = {"no_gap_per_feature": round(floor, 3),
+             **({"order_floors_z2": tuple(round(floors[k], 2) for k in TESTED_ORDERS)}
+                if floors else {})}
     if pilot:
-        frozen = fit_thresholds(pilot, replace(base, no_gap_per_feature=round(floor, 3)))
+        frozen = fit_thresholds(pilot, replace(base, **refit))
         source = f"fitted on {len(pilot)} own-family pilot trials"
     else:
         # no pilot run: the thresholds frozen in the package (fitted on earlier own-family
-        # pilots), with the noise floor of this run's null trials
-        frozen = replace(DiagnosisSettings(), no_gap_per_feature=round(floor, 3))
-        source = "frozen in sknarx.gap.settings (no pilot in this run), noise floor refitted"
+        # pilots), with the noise floors of this run's null trials
+        frozen = replace(DiagnosisSettings(), **refit)
+        source = "frozen in sknarx.gap.settings (no pilot in this run), noise floors refitted"
     print("frozen thresholds:", frozen, f"({source})")
-    # the secondary by-kind rules (ByKind), on the trials that logged their kinds
-    floors = kind_floors(null)
     null_median = float(np.median([r["e0"] for r in null]))
-    rules = secondary_rules(floors, null_median)
+    rules = secondary_rules(null_median)
     per_family = {}
     rows = []
     for fam, recs in evals.items():
         sc = score(recs, frozen)
         times = [r["seconds"] for r in recs]
         sc["median_seconds"] = float(np.median(times)) if times else float("nan")
-        kinded = [r for r in recs if "e0_by_kind" in r]
         secondary = {}
         for name, rule in rules.items():
-            decided = [(r, verdict(r, frozen)[0], verdict(r, frozen, rule)[0]) for r in kinded]
+            decided = [(r, verdict(r, frozen)[0], verdict(r, frozen, rule)[0]) for r in recs]
             secondary[name] = {
-                **score(kinded, frozen, rule), "confusion": confusion(kinded, frozen, rule),
+                **score(recs, frozen, rule), "confusion": confusion(recs, frozen, rule),
                 "changed": [{"seed": r["seed"], "truth": truth_label(r, frozen),
                              "frozen": a, name: b} for r, a, b in decided if a != b]}
         per_family[fam] = {"scores": sc, "secondary_rules": secondary,
@@ -703,8 +696,7 @@ def main():
                  "out-of-lib beyond lib. (of)",
                  "right place (of)", "trials", "median s"])
     if rules:
-        print("secondary rules (ByKind; the trials that logged their kinds), kind floors "
-              + ", ".join(f"{k} {v:.2f}" for k, v in floors.items()))
+        print("secondary rules (beside the frozen rule, never instead)")
         table([[fam, name, v["n_trials"]]
                + [f"{v[k]:.2f}" for k in ("top1", "pairs_in_top2", "false_alarm",
                                           "unexplained_out_of_library")]
@@ -722,8 +714,9 @@ def main():
         "noise_floor": {"no_gap_per_feature": floor, "quantile": 0.99, "n_null": len(null),
                         "null_e0_median": null_median,
                         "null_e0_max": float(max(r["e0"] for r in null)),
-                        # the by-kind rules' floors on mean z2 (kind_floors), None
-                        # where the null trials did not log their kinds
+                        # the per-order floors on mean z2 (kind_floors; rounded, they
+                        # are the thresholds' order_floors_z2), None where the null
+                        # trials did not log their orders
                         "kind_floors_z2": floors},
         "planned": {"null": args.null, "pilot": args.pilot, "evaluation": args.trials},
         "complete": {fam: len(recs) for fam, recs in evals.items()},

@@ -23,7 +23,10 @@ the search (pairs are fitted where the best single leaves more than it); the bli
 searches with 0.2 per feature whatever it decides with, so any what-if trigger from 0.2
 up finds its pairs in the log, and one below is refused. A pair trial whose members'
 visibility (``gap_blind_member_gaps.json``) was not computed counts both members as
-visible, as the blind run's report does.
+visible, as the blind run's report does. The per-order floors (``order_floors_z2``, e.g.
+``--what-if order_floors_z2=2.48,1.81,1.76``) act only on trials that logged their
+orders' gaps (``e0_by_kind``, from the 37000 run on); the blind run searches every trial,
+under the floor or not, so their rankings are there to decide from.
 """
 
 from __future__ import annotations
@@ -46,8 +49,8 @@ from sknarx.gap import DiagnosisSettings  # noqa: E402
 SEARCH_PAIR_TRIGGER = 0.2
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
-DECISION = ("no_gap_per_feature", "min_shrink", "min_log_shrink", "breadth_waived_at_floor",
-            "pair_trigger", "pair_gain", "pair_margin")
+DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
+            "breadth_waived_at_floor", "pair_trigger", "pair_gain", "pair_margin")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -61,11 +64,17 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
 
 def _value(name: str, text: str):
     """A decision setting's value: a float (``pair_margin`` also None), the one switch
-    ``breadth_waived_at_floor`` True or False."""
+    ``breadth_waived_at_floor`` True or False, ``order_floors_z2`` three comma-separated
+    floats (1x, 2x, 3x) or None."""
     if name == "breadth_waived_at_floor":
         if text not in ("True", "False"):
             raise ValueError(text)
         return text == "True"
+    if name == "order_floors_z2" and text != "None":
+        values = tuple(float(v) for v in text.split(","))
+        if len(values) != 3:
+            raise ValueError(text)
+        return values
     return None if text == "None" else float(text)
 
 
@@ -109,8 +118,12 @@ def frozen_thresholds(path, ap):
     """The frozen thresholds of a ``bench_gap_blind`` JSON report (see :func:`_report`)."""
     thresholds = _report(path, ap)["thresholds"]
     known = {f.name for f in fields(DiagnosisSettings)}
-    # a report written before the breadth waiver existed was decided without it
+    # a report written before the breadth waiver existed was decided without it, and
+    # one written before the per-order floors without them
     thresholds.setdefault("breadth_waived_at_floor", False)
+    thresholds.setdefault("order_floors_z2", None)
+    if thresholds["order_floors_z2"] is not None:  # a JSON list
+        thresholds["order_floors_z2"] = tuple(thresholds["order_floors_z2"])
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
 
 
@@ -160,7 +173,8 @@ def main(argv=None):
             changes[name] = _value(name, text)
         except ValueError:
             ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin, "
-                     "True or False for breadth_waived_at_floor)")
+                     "True or False for breadth_waived_at_floor, three comma-separated "
+                     "numbers or None for order_floors_z2)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
@@ -182,11 +196,10 @@ def main(argv=None):
                 changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
                                 json.dumps(a), json.dumps(b)])
     floor = _report(args.report, ap).get("noise_floor", {})
-    secondary = secondary_rules(floor.get("kind_floors_z2"), floor.get("null_e0_median"))
+    secondary = secondary_rules(floor.get("null_e0_median"))
     for fam, recs in evals.items():
-        kinded = [r for r in recs if "e0_by_kind" in r]
         for name, rule in secondary.items():
-            sc = score(kinded, frozen, rule)
+            sc = score(recs, frozen, rule)
             counted += [[fam, f"{key} ({name})", f"{k}/{n}", f"{sc[key]:.2f}",
                          f"{lo:.2f}-{hi:.2f}"] for key, k, n, lo, hi in intervals(sc)]
     print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")

@@ -97,7 +97,7 @@ def _kinds(z2_2x, z2_1x=0.1):
     return {k: {"excess": max(v - 1.0, 0.0), "z2": v, "n": 24} for k, v in z.items()}
 
 
-def test_the_by_kind_rule_sends_a_followed_sweep_to_the_candidates():
+def test_a_logged_sweep_is_decided_with_its_orders_tested_on_their_own():
     # a crack the update followed: 0.20 per feature (under the floor) but a 2x of mean
     # z2 2.3; the crack removes 54 % of E0 -- under min_shrink, though all but the
     # noise's share (0.112 per feature) of what is above it
@@ -107,17 +107,21 @@ def test_the_by_kind_rule_sends_a_followed_sweep_to_the_candidates():
              "E0": 20.0, "e0_by_kind": _kinds(2.3)}
     quiet = {**_record("none", {}, [("clearance", 0.3, 0.2, 0.07, {})], e0=0.1),
              "E0": 10.0, "kind": "none", "e0_by_kind": _kinds(0.9)}
-    floors = {"1x": 1.6, "2x": 1.6, "3x": 1.6}
-    assert blind.verdict(crack, S)[0] == "no-gap"  # the package's rule
-    assert blind.verdict(crack, S, blind.ByKind(floors))[0] == "unexplained"
-    assert blind.verdict(crack, S, blind.ByKind(floors, 0.112))[0] == "crack"
+    s = replace(S, order_floors_z2=(1.6, 1.6, 1.6))
+    assert blind.orders_over(crack, s) == {"2x": 2.3}
+    assert blind.verdict(crack, s)[0] == "unexplained"  # sent to the candidates
+    assert blind.verdict(crack, replace(s, order_floors_z2=None))[0] == "no-gap"
+    referenced = blind.NoiseReferencedShrink(0.112)
+    assert blind.verdict(crack, s, referenced)[0] == "crack"
     # an effect-free sweep under every floor stays no-gap under both
-    for rule in (blind.ByKind(floors), blind.ByKind(floors, 0.112)):
-        assert not rule.triggered(quiet)
-        assert blind.verdict(quiet, S, rule)[0] == "no-gap"
-    # and a sweep logged without its kinds is decided as the package decides it
+    assert blind.orders_over(quiet, s) == {}
+    for rule in (None, referenced):
+        assert blind.verdict(quiet, s, rule)[0] == "no-gap"
+    # and a sweep logged without its orders is decided as the package then decided it
     old = {k: v for k, v in crack.items() if k != "e0_by_kind"}
-    assert blind.verdict(old, S, blind.ByKind(floors))[0] == "no-gap"
+    assert blind.verdict(old, s)[0] == "no-gap"
+    assert blind.secondary_rules(None) == {}
+    assert blind.secondary_rules(0.112) == {"noise_referenced_shrink": referenced}
 
 
 def test_kind_floors_are_a_bonferroni_quantile_of_the_effect_free_trials():

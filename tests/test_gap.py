@@ -403,6 +403,43 @@ def test_a_candidate_that_leaves_no_more_than_the_floor_needs_no_breadth():
     assert decide(2.0, [thin], replace(s, breadth_waived_at_floor=False), 100) is None
 
 
+def test_one_order_over_its_floor_sends_a_sweep_under_the_floor_to_the_candidates():
+    """A crack the nominal update followed as a softer shaft leaves only its 2x: the mean
+    over every held-out feature is under the floor, the 2x's own mean is not."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide, order_mean_z2, orders_over_floor
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.6, min_log_shrink=0.3,
+                          order_floors_z2=(2.5, 1.8, 1.8))
+    rows = [{"feature": f, "z2": z} for f, zs in
+            (("1x", [1.0, 1.2]), ("2x", [2.0, 3.0]), ("3x", [0.5, 0.7]), ("50Hz", [9.0]))
+            for z in zs]
+    by_order = order_mean_z2(pd.DataFrame(rows))
+    assert by_order == {"1x": {"mean_z2": 1.1, "n": 2}, "2x": {"mean_z2": 2.5, "n": 2},
+                        "3x": {"mean_z2": pytest.approx(0.6), "n": 2}}  # lines are not orders
+    over = orders_over_floor({k: v["mean_z2"] for k, v in by_order.items()}, s)
+    assert over == {"2x": 2.5}
+    crack = _entry(["crack"], 8.0, 0.8, 0.5)
+    assert decide(0.4, [crack], s, 100) == "no-gap"  # the mean alone
+    assert decide(0.4, [crack], s, 100, over)["effect"] == "crack"
+    # sent to the candidates, a sweep none of them explains is unexplained, not no-gap
+    assert decide(0.4, [_entry(["rub"], 30.0, 0.25, 0.1)], s, 100, over) is None
+    # the floors unset: the mean over every feature alone decides
+    assert orders_over_floor({"2x": 99.0}, replace(s, order_floors_z2=None)) == {}
+
+
+def test_the_report_names_the_orders_that_sent_a_sweep_to_the_candidates():
+    from sknarx.gap.report import _orders_text
+
+    doc = {"gap_before": {"by_order": {
+        "1x": {"mean_z2": 0.8, "n": 24, "floor_z2": 2.48, "over_floor": False},
+        "2x": {"mean_z2": 2.31, "n": 24, "floor_z2": 1.81, "over_floor": True}}}}
+    text = _orders_text(doc)
+    assert "the 24 held-out 2x features (mean z\u00b2 2.31 against their floor 1.81" in text
+    assert "1x" not in text
+    assert _orders_text({"gap_before": {}}) == ""
+
+
 @given(e0=st.floats(0.01, 100.0), left=st.floats(0.0, 1.0), log_share=st.floats(-2.0, 1.0),
        floor=st.floats(0.05, 1.0))
 def test_the_breadth_waiver_only_adds_verdicts_that_leave_the_floor(e0, left, log_share,

@@ -14,7 +14,8 @@ both:
 * the ranking by held-out excess plus two per effect parameter, an AIC on the
   chi-square scale (:func:`rank`);
 * the verdict (:func:`decide`, thresholds from the front end's
-  :class:`~sknarx.gap.DiagnosisSettings`);
+  :class:`~sknarx.gap.DiagnosisSettings`), with the held-out 1x, 2x and 3x features
+  also tested order by order (:func:`orders_over_floor`);
 * how firmly the held-out speeds chose a discrete setting (a crack's station, a rub's
   disk) over the others (:func:`setting_support`);
 * the shrink of the held-out gap with its bootstrap band over held-out speeds
@@ -35,13 +36,17 @@ from joblib import Parallel, delayed
 from .._progress import progress_bar
 
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
-           "decide", "effect_names", "log_shrink", "preferred", "public_ranking", "rank",
-           "recheck_choice", "regions_after", "run_parallel", "search", "setting_support", "shrink",
-           "table_evidence"]
+           "decide", "effect_names", "log_shrink", "order_mean_z2", "orders_over_floor",
+           "preferred", "public_ranking", "rank", "recheck_choice", "regions_after",
+           "run_parallel", "search", "setting_support", "shrink", "table_evidence"]
 
 logger = logging.getLogger(__name__)
 
 _KEY = ["speed", "window", "channel", "feature"]
+
+#: the orders whose held-out features are tested on their own beside the mean over every
+#: feature, in the order of :attr:`~sknarx.gap.DiagnosisSettings.order_floors_z2`
+TESTED_ORDERS = ("1x", "2x", "3x")
 
 
 def alternating_split(n: int, block: int = 1) -> np.ndarray:
@@ -219,7 +224,33 @@ def preferred(ranking: list, settings, n_features: int):
     return best
 
 
-def decide(e0: float, ranking: list, settings, n_features: int):
+def order_mean_z2(cmp: pd.DataFrame) -> dict[str, dict]:
+    """Each :data:`TESTED_ORDERS` order's mean z2 over its held-out features in the
+    comparison table ``cmp``, with their number: ``{order: {"mean_z2", "n"}}`` (orders
+    the table lacks are left out)."""
+    rows = cmp[cmp["feature"].isin(TESTED_ORDERS)].groupby("feature")["z2"]
+    return {k: {"mean_z2": float(m), "n": int(n)}
+            for k, m, n in zip(rows.mean().index, rows.mean(), rows.size(), strict=True)}
+
+
+def orders_over_floor(mean_z2: dict, settings) -> dict[str, float]:
+    """The orders whose mean z2 over their held-out features (``mean_z2``: order to
+    value) exceeds that order's floor in ``settings.order_floors_z2``, with the value.
+
+    The held-out excess per feature is a mean over every order and line: an effect the
+    nominal update followed everywhere but in one order -- a crack whose loss of mean
+    stiffness the update takes as a softer shaft, leaving only its 2x -- is diluted by
+    the others below the no-gap floor. Tested order by order (each floor an effect-free
+    quantile with the three orders' Bonferroni share), such a sweep still goes to the
+    candidates (:func:`decide`). Empty with the floors unset."""
+    floors = settings.order_floors_z2
+    if floors is None:
+        return {}
+    return {k: float(mean_z2[k]) for k, f in zip(TESTED_ORDERS, floors, strict=True)
+            if k in mean_z2 and mean_z2[k] > f}
+
+
+def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     """The verdict from the held-out gap per feature and the ranked candidates.
 
     Returns ``'no-gap'``, the chosen ranking entry, or ``None`` (unexplained); a chosen
@@ -239,8 +270,12 @@ def decide(e0: float, ranking: list, settings, n_features: int):
     the model-form residual spread thinly over many features is what holds the
     logarithm's share down, and no effect removes that. Which candidate is judged:
     :func:`preferred`.
+
+    ``orders_over`` (:func:`orders_over_floor`) names the orders whose held-out features
+    exceed their own floor: a sweep under ``no_gap_per_feature`` with any is decided as
+    one above it (the candidates must explain it, or it is unexplained).
     """
-    if e0 <= settings.no_gap_per_feature:
+    if e0 <= settings.no_gap_per_feature and not orders_over:
         return "no-gap"
     choice = preferred(ranking, settings, n_features)
     if choice is None:
@@ -408,14 +443,14 @@ def _without_linear_members(front, fits, E0, cmp0, tick):
 
 
 def recheck_choice(front: FrontEnd, choice, ranked: list, E0: float, cmp0: pd.DataFrame,
-                   settings, n_features: int, e0: float):
+                   settings, n_features: int, e0: float, orders_over=()):
     """Where the verdict has a discrete setting (a crack's station, a rub's disk), each
     other setting refitted from the verdict's own fit (``front.recheck_setting``): a
     setting whose own search missed the basin the chosen one found is no evidence
     against it, and one that now fits the held-out speeds better replaces the verdict's
     fit in the ranking, which is then decided again (once). Only the verdict is
-    rechecked (one converged run per other setting). Returns the choice and ranking to
-    conclude from."""
+    rechecked (one converged run per other setting). ``e0`` and ``orders_over`` as
+    :func:`decide` reads them. Returns the choice and ranking to conclude from."""
     if not isinstance(choice, dict) or "_fit" not in choice:
         return choice, ranked
     out = front.recheck_setting(choice["_fit"])
@@ -429,7 +464,7 @@ def recheck_choice(front: FrontEnd, choice, ranked: list, E0: float, cmp0: pd.Da
     better.details.update(entries)
     fits = [better if r is choice else r["_fit"] for r in ranked]
     ranked = rank(fits, E0, cmp0)
-    return decide(e0, ranked, settings, n_features), ranked
+    return decide(e0, ranked, settings, n_features, orders_over), ranked
 
 
 def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:

@@ -9,7 +9,8 @@ search, ranking, verdict and shrink are the gap core's (:mod:`sknarx.gap.core`):
    carries what the update left uncertain (its spread over the update's sigma
    points). Then calibrate the nuisance parameters (unbalance, stiffness and damping
    scales); the remaining held-out gap is the gap *before*. If it is within the noise
-   floor, the verdict is ``no-gap``.
+   floor, and so is each of its 1x, 2x and 3x features' mean on its own
+   (:func:`sknarx.gap.core.orders_over_floor`), the verdict is ``no-gap``.
 3. Calibrate every candidate effect (with the nuisances) on the training steps and
    measure the held-out gap *after*; rank by the after-gap plus a penalty of two
    per effect parameter (an AIC on the chi-square scale).
@@ -49,11 +50,14 @@ from .calibration import (
     search_vector,
 )
 from .core import (
+    TESTED_ORDERS,
     CandidateFit,
     FrontEnd,
     alternating_split,
     conclude,
     decide,
+    order_mean_z2,
+    orders_over_floor,
     public_ranking,
     recheck_choice,
     run_parallel,
@@ -579,11 +583,16 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     tick("nuisance calibration")
     e0 = E0 / max(len(cmp0), 1)
     n_features = max(len(cmp0), 1)
+    by_order = order_mean_z2(cmp0)
+    over = orders_over_floor({k: v["mean_z2"] for k, v in by_order.items()}, settings)
+    floors = dict(zip(TESTED_ORDERS, settings.order_floors_z2 or (None,) * 3, strict=True))
     doc = {
         "verdict": None, "ranking": [], "where": regions(cmp_all),
         "shrink": 0.0,
         "gap_before": {"heldout_excess": E0, "per_feature": e0,
-                       "rms_gap_m": float(np.sqrt(np.mean(cmp0["gap"] ** 2)))},
+                       "rms_gap_m": float(np.sqrt(np.mean(cmp0["gap"] ** 2))),
+                       "by_order": {k: {**v, "floor_z2": floors[k], "over_floor": k in over}
+                                    for k, v in by_order.items()}},
         "nuisance": {"calibrated": cal0.nuisance, "std": cal0.std},
         "noise": _noise_summary(meas),
         "split": {"train_speeds": train.tolist(), "heldout_speeds": held.tolist()},
@@ -611,7 +620,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         doc["nominal_update"]["backward_whirl_1x"] = _whirl_summary(meas)
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
-    if e0 <= settings.no_gap_per_feature and not exhaustive:
+    if e0 <= settings.no_gap_per_feature and not over and not exhaustive:
         doc["verdict"] = "no-gap"
         return result
 
@@ -623,17 +632,19 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     nuis_start[[list(NUISANCE).index("stiffness_scale"),
                 list(NUISANCE).index("damping_scale")]] = 1.0
     front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, nuis_start)
-    logger.info("held-out gap %.3g per feature (no-gap floor %.3g): fitting %d effect "
-                "candidate(s)", e0, settings.no_gap_per_feature, len(candidates))
+    logger.info("held-out gap %.3g per feature (no-gap floor %.3g)%s: fitting %d effect "
+                "candidate(s)", e0, settings.no_gap_per_feature,
+                "".join(f", {k} mean z2 {v:.3g} over its floor {floors[k]:.3g}"
+                        for k, v in over.items()), len(candidates))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ranked = search(front, candidates, E0, cmp0, n_features, settings, tick)
-    choice = decide(e0, ranked, settings, n_features)
+    choice = decide(e0, ranked, settings, n_features, over)
     if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             choice, ranked = recheck_choice(front, choice, ranked, E0, cmp0, settings,
-                                            n_features, e0)
+                                            n_features, e0, over)
         tick("verdict's other settings refitted from its fit")
     doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
     if isinstance(choice, dict):

@@ -217,6 +217,20 @@ def effect_parameters(effect, params) -> str:
     return "; ".join(parts)
 
 
+def _orders_text(doc) -> str:
+    """The orders whose held-out features exceeded their own floor (a sweep sent to the
+    candidates with its mean over every feature under the no-gap floor), as a sentence."""
+    over = {k: v for k, v in ((doc.get("gap_before") or {}).get("by_order") or {}).items()
+            if v.get("over_floor")}
+    if not over:
+        return ""
+    parts = [f"the {v['n']} held-out {k} features (mean z\u00b2 {v['mean_z2']:.3g} against "
+             f"their floor {v['floor_z2']:.3g}, dimensionless)" for k, v in over.items()]
+    return (" On their own, " + " and ".join(parts) + " exceed the effect-free level, so "
+            "the candidates were fitted although the mean over every feature is within "
+            "the no-gap floor.")
+
+
 def _html(doc, figs, prov):
     verdict = doc["verdict"]
     floor = float(doc["settings"]["no_gap_per_feature"])
@@ -240,7 +254,8 @@ def _html(doc, figs, prov):
         headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
-                    "a nominal model further from the rig than the nuisance scalars allow.")
+                    "a nominal model further from the rig than the nuisance scalars allow."
+                    + _orders_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
@@ -250,7 +265,7 @@ def _html(doc, figs, prov):
                     f"the no-gap floor {floor:.3g}."
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
-                    + _undecided_text(doc))
+                    + _orders_text(doc) + _undecided_text(doc))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "

@@ -33,6 +33,14 @@ class DiagnosisSettings:
     # told from an effect-free sweep, so the breadth check has nothing to guard
     # (sknarx.gap.core.decide; docs/gap.md, *Verdict*)
     breadth_waived_at_floor: bool = True
+    # each order's held-out features are also tested on their own: a sweep under
+    # no_gap_per_feature still goes to the candidates when the mean z2 of its held-out
+    # 1x, 2x or 3x features exceeds that order's floor (sknarx.gap.core.orders_over_floor).
+    # An effect the nominal update followed but in one order (a crack's 2x) is diluted
+    # in the mean over every feature. Each floor is the 1 - 0.01/3 quantile (log-normal,
+    # Bonferroni over the three orders) of that mean on effect-free trials, measured
+    # and frozen like no_gap_per_feature; None: the mean over every feature alone decides
+    order_floors_z2: tuple[float, float, float] | None = (2.48, 1.81, 1.76)
     pair_trigger: float = 0.5  # try pairs when the best single leaves this excess per feature
     pair_gain: float = 0.3  # a pair must remove this share of what the best single leaves
     # ... and score (AIC: held-out excess + 2 per parameter) this much below it; None: the
