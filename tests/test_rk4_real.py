@@ -219,3 +219,48 @@ def test_bode_loader_units_and_binning():
     bins = bin_bode(rows)
     plateau = bins[bins.rpm > 4900]
     assert plateau.n.sum() > 5000 and len(plateau) <= 10
+
+
+@pytest.fixture(scope="module")
+def steady(tmp_path_factory):
+    """The same record and rotor file with the response forced steady (``response =
+    'steady'``): the path a slow, quasi-steady run-up takes once ``auto`` has found it
+    slow, which no shipped record takes on its own."""
+    from sknarx.cli import main
+
+    work = tmp_path_factory.mktemp("rk4-steady")
+    text = (ROOT / "examples" / "rk4" / "rotor.toml").read_text()
+    assert text.count("[measurement]\n") == 1
+    rotor = work / "rotor.toml"
+    rotor.write_text(text.replace("[measurement]\n", '[measurement]\nresponse = "steady"\n'))
+    assert main(["gap", "--measured", str(DATA), "--rotor", str(rotor),
+                 "--out", str(work / "out"), "--quiet"]) == 0
+    return json.loads((work / "out" / "diagnosis.json").read_text())
+
+
+def test_a_run_up_taken_as_steady_is_diagnosed_on_the_steady_order_response(steady,
+                                                                            diagnosis):
+    run_up, _ = diagnosis
+    # the same documented keys whichever response model the record is compared with
+    assert set(steady) == set(run_up)
+    assert steady["response_model"] == {"kind": "steady-state order response"}
+    # forced steady, the run-up's rate is not measured, so nothing is claimed about it
+    assert steady["sweep"]["rate_rpm_s"] is None
+    assert steady["sweep"]["quasi_steady_valid"] is None
+    # the steady calibration still finds the measured critical speed (within 2 %)
+    crit = steady["nominal_calibration"]["first_critical_rpm"]
+    assert abs(crit["calibrated"] - crit["measured"]) < 0.02 * crit["measured"]
+    # the runout is found as on the run-up model, a few micrometres, below the critical
+    assert steady["verdict"] == "runout"
+    lo, hi = steady["shrink_band"]
+    assert 0.5 <= lo <= steady["shrink"] <= hi
+    runout = steady["ranking"][0]
+    assert runout["effect"] == "runout"
+    assert 2e-6 < runout["params"]["runout_amplitude_m"] < 8e-6
+    assert steady["located"]["runout"]["rpm_range"][0] < 1200 < crit["measured"]
+    # the anisotropy the run-up names shows in the beat after the critical, which a
+    # steady response has not got: beside the runout it removes almost nothing more
+    pair = next(r for r in steady["ranking"] if sorted(r["effect"]) == ["anisotropy",
+                                                                          "runout"])
+    assert pair["heldout_gap_after"] > 0.9 * runout["heldout_gap_after"]
+    assert sorted(run_up["verdict"]) == ["anisotropy", "runout"]
