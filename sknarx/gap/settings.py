@@ -26,7 +26,7 @@ class DiagnosisSettings:
 
     # the verdict thresholds are fitted by benchmarks/bench_gap_blind.py and frozen here;
     # where each value came from (trials, seeds, quantiles) is in docs/gap_validation.md
-    no_gap_per_feature: float = 0.300  # mean held-out excess per feature below which: no-gap
+    no_gap_per_feature: float = 0.340  # mean held-out excess per feature below which: no-gap
     min_shrink: float = 0.6  # a verdict must remove at least this share of the gap
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
     # ... unless it leaves no more than no_gap_per_feature: what is left then cannot be
