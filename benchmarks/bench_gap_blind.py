@@ -30,7 +30,7 @@ noise), the confusion matrix, and on effect-free trials the nominal updates foun
 An effect is *detectable* when it moves the measurement by more than the noise floor
 (held-out excess per feature of the measurement against the same plant without it).
 The package's per-order floors (``order_floors_z2``) are refitted on the null trials
-like the noise floor (:func:`kind_floors`). Beside the scores, never instead, the report
+like the noise floor (:func:`order_floors`). Beside the scores, never instead, the report
 scores secondary rules on the same logs (:class:`NoiseReferencedShrink`) under
 ``secondary_rules``.
 """
@@ -249,7 +249,7 @@ class NoiseReferencedShrink:
     noise_per_feature: float
 
 
-def kind_floors(null, alpha=0.01):
+def order_floors(null, alpha=0.01):
     """Each tested order's floor (:data:`sknarx.gap.core.TESTED_ORDERS`): the
     ``1 - alpha / 3`` quantile (log-normal fit, Bonferroni over the three orders) of the
     effect-free trials' mean z2 over that order's held-out features; None with fewer
@@ -627,7 +627,7 @@ def main():
     floor = noise_floor(null)
     # the per-order floors too, where the null trials logged their orders (else the
     # package's frozen ones)
-    floors = kind_floors(null)
+    floors = order_floors(null)
     refit = {"no_gap_per_feature": round(floor, 3),
              **({"order_floors_z2": tuple(round(floors[k], 2) for k in TESTED_ORDERS)}
                 if floors else {})}
@@ -714,7 +714,7 @@ def main():
         "noise_floor": {"no_gap_per_feature": floor, "quantile": 0.99, "n_null": len(null),
                         "null_e0_median": null_median,
                         "null_e0_max": float(max(r["e0"] for r in null)),
-                        # the per-order floors on mean z2 (kind_floors; rounded, they
+                        # the per-order floors on mean z2 (order_floors; rounded, they
                         # are the thresholds' order_floors_z2), None where the null
                         # trials did not log their orders
                         "kind_floors_z2": floors},

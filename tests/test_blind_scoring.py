@@ -124,17 +124,17 @@ def test_a_logged_sweep_is_decided_with_its_orders_tested_on_their_own():
     assert blind.secondary_rules(0.112) == {"noise_referenced_shrink": referenced}
 
 
-def test_kind_floors_are_a_bonferroni_quantile_of_the_effect_free_trials():
+def test_order_floors_are_a_bonferroni_quantile_of_the_effect_free_trials():
     rng = np.random.default_rng(3)
     null = [{"e0_by_kind": {k: {"z2": float(v), "excess": 0.0, "n": 24}
                             for k, v in zip(("1x", "2x", "3x"), rng.lognormal(-0.7, 0.4, 3),
                                             strict=True)}} for _ in range(400)]
-    floors = blind.kind_floors(null)
+    floors = blind.order_floors(null)
     # each kind's floor: the 1 - 0.01/3 quantile of a log-normal(-0.7, 0.4)
     want = np.exp(-0.7 + 0.4 * 2.713)
     assert floors == pytest.approx({"1x": want, "2x": want, "3x": want}, rel=0.06)
-    assert blind.kind_floors(null[:2]) is None
-    assert blind.kind_floors([{"e0": 0.1}] * 5) is None  # logged before the kinds were
+    assert blind.order_floors(null[:2]) is None
+    assert blind.order_floors([{"e0": 0.1}] * 5) is None  # logged before the kinds were
 
 
 def test_the_place_is_scored_apart_where_the_data_did_not_decide_it():
