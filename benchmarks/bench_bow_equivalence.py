@@ -22,7 +22,7 @@ part of the bow that runout and an unbalance update cannot express; the 2x that 
 adds through the bearings is reported beside it (the runout's own 2x term can take a
 constant one). A bow that the library expresses to a few per cent is not an
 out-of-library effect in these data; a verdict ``runout`` on it is the observationally
-equivalent answer (docs/gap.md, *Thermal bow*). The benchmark's thermal bow therefore
+equivalent answer (docs/gap_validation.md, *The thermal bow*). The benchmark's thermal bow therefore
 relaxes over the sweep (a hot rotor's bow evening out as it turns: ``bow exp(-k /
 relax_steps)`` at the k-th step), and the second row of each family measures what the
 library's runout and unbalance leave of that one.

@@ -172,7 +172,8 @@ def _window_features(w, Y, fs, plan):
     ``plan`` being its :class:`_WindowPlan`."""
     n, B = Y.shape[0], plan.B
     # lstsq, not a cached pseudo-inverse: the product rounds differently, and at 1e-11
-    # the calibration's search already chose another basin in places (docs/gap.md, Cost)
+    # the calibration's search already chose another basin in places
+    # (docs/gap_validation.md, Cost history)
     coef, *_ = np.linalg.lstsq(B, Y, rcond=None)
     R = Y - B @ coef
     dof = max(n - B.shape[1], 1)

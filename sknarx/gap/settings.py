@@ -59,7 +59,7 @@ class DiagnosisSettings:
     # a pair's partner is probed (and then fitted) on top of the lead's converged fit,
     # a better informed start than a single's: half the probes per parameter and half
     # the short local runs per discrete setting (calibrate's n_short: 4 for singles);
-    # what it saves and costs is measured in docs/gap.md (Cost)
+    # what it saves and costs is measured in docs/gap_validation.md (Cost history)
     pair_probes_per_parameter: int | None = 8
     pair_short_starts: int = 2
     transient_s: float = 0.5  # transient window of records that start with a transient
