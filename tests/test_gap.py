@@ -428,6 +428,40 @@ def test_one_order_over_its_floor_sends_a_sweep_under_the_floor_to_the_candidate
     assert orders_over_floor({"2x": 99.0}, replace(s, order_floors_z2=None)) == {}
 
 
+@given(e0=st.floats(0.01, 10.0), floor=st.floats(0.05, 1.0),
+       z2=st.lists(st.floats(0.0, 10.0), min_size=3, max_size=3),
+       floors=st.lists(st.floats(0.1, 5.0), min_size=3, max_size=3),
+       shrink=st.floats(-0.5, 1.0), log_share=st.floats(-1.0, 1.0))
+def test_the_order_test_only_sends_sweeps_under_the_floor_on(e0, floor, z2, floors, shrink,
+                                                           log_share):
+    """Above the floor the orders change nothing; under it a sweep is no-gap unless an
+    order is over its own floor, and then it is decided as a sweep above the floor is;
+    a higher floor never puts an order over it."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide, orders_over_floor
+
+    n = 100
+    ranking = [_entry(["crack"], (1.0 - shrink) * e0 * n, shrink, log_share)]
+    s = DiagnosisSettings(no_gap_per_feature=floor, min_shrink=0.6, min_log_shrink=0.3,
+                          order_floors_z2=tuple(floors))
+    mean_z2 = dict(zip(("1x", "2x", "3x"), z2, strict=True))
+    over = orders_over_floor(mean_z2, s)
+    assert set(over) == {k for k, f in zip(("1x", "2x", "3x"), floors, strict=True)
+                         if mean_z2[k] > f}
+    higher = replace(s, order_floors_z2=tuple(2 * f for f in floors))
+    assert set(orders_over_floor(mean_z2, higher)) <= set(over)
+    plain = decide(e0, ranking, s, n)
+    tested = decide(e0, ranking, s, n, over)
+    if e0 > floor or not over:
+        assert tested is plain or tested == plain
+    else:
+        assert plain == "no-gap"
+        # the same sweep with the floor under it (a candidate removing min_shrink leaves
+        # at most 0.4 e0, under either floor, so the breadth waiver acts alike)
+        above = decide(e0, ranking, replace(s, no_gap_per_feature=e0 / 2), n)
+        assert (tested is None) == (above is None)
+
+
 def test_the_report_names_the_orders_that_sent_a_sweep_to_the_candidates():
     from sknarx.gap.report import _orders_text
 
