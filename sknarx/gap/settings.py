@@ -109,7 +109,8 @@ class DiagnosisSettings:
 #: and does not widen it (its log-excess does not grow); the pair is always tried and
 #: replaces its better member when its AIC is 10 lower (strong evidence on the
 #: chi-square scale); no noise floor is claimed (a record whose held-out bins all agree
-#: within their scatter is ``no-gap``); 300 bootstrap draws.
+#: within their scatter is ``no-gap``), and with the 1x alone there are no orders to test
+#: on their own; 300 bootstrap draws.
 ORDER_DOMAIN_SETTINGS = DiagnosisSettings(
-    no_gap_per_feature=0.0, min_shrink=0.5, min_log_shrink=0.0, pair_trigger=0.0,
-    pair_gain=0.0, pair_margin=10.0, n_bootstrap=300, seed=0)
+    no_gap_per_feature=0.0, order_floors_z2=None, min_shrink=0.5, min_log_shrink=0.0,
+    pair_trigger=0.0, pair_gain=0.0, pair_margin=10.0, n_bootstrap=300, seed=0)
