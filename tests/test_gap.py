@@ -354,6 +354,13 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
                 "evidence"):
         assert key in r0
     assert {"speed_range", "order", "channel", "share"} <= set(doc["where"][0])
+    # each order's held-out mean z2 against its own floor, as documented
+    by_order = doc["gap_before"]["by_order"]
+    assert set(by_order) == {"1x", "2x", "3x"}
+    for k, floor in zip(("1x", "2x", "3x"), doc["settings"]["order_floors_z2"], strict=True):
+        row = by_order[k]
+        assert row["floor_z2"] == floor and row["n"] > 0
+        assert row["over_floor"] == (row["mean_z2"] > floor)
     assert "narx" in doc and doc["narx"]["terms_measured"]
     html = (tmp_path / "out" / "report.html").read_text()
     assert "noise level: about" not in html  # the floor comes from the settings
