@@ -414,7 +414,7 @@ def test_one_order_over_its_floor_sends_a_sweep_under_the_floor_to_the_candidate
     """A crack the nominal update followed as a softer shaft leaves only its 2x: the mean
     over every held-out feature is under the floor, the 2x's own mean is not."""
     from sknarx.gap import DiagnosisSettings
-    from sknarx.gap.core import decide, order_mean_z2, orders_over_floor
+    from sknarx.gap.core import decide, order_floors, order_mean_z2, orders_over_floor
 
     s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.6, min_log_shrink=0.3,
                           order_floors_z2=(2.5, 1.8, 1.8))
@@ -433,6 +433,12 @@ def test_one_order_over_its_floor_sends_a_sweep_under_the_floor_to_the_candidate
     assert decide(0.4, [_entry(["rub"], 30.0, 0.25, 0.1)], s, 100, over) is None
     # the floors unset: the mean over every feature alone decides
     assert orders_over_floor({"2x": 99.0}, replace(s, order_floors_z2=None)) == {}
+    assert order_floors(replace(s, order_floors_z2=None)) == {}
+    assert order_floors(s) == {"1x": 2.5, "2x": 1.8, "3x": 1.8}
+    # before any candidate (the front end's early return asks decide with none)
+    assert decide(0.4, [], s, 100) == "no-gap"
+    assert decide(0.4, [], s, 100, over) is None
+    assert decide(0.6, [], s, 100) is None
 
 
 @given(e0=st.floats(0.01, 10.0), floor=st.floats(0.05, 1.0),
@@ -479,6 +485,23 @@ def test_the_report_names_the_orders_that_sent_a_sweep_to_the_candidates():
     assert "the 24 held-out 2x features (mean z\u00b2 2.31 against their floor 1.81" in text
     assert "1x" not in text
     assert _orders_text({"gap_before": {}}) == ""
+
+
+def test_the_report_tables_each_order_against_its_floor():
+    from sknarx.gap.report import _orders_table
+
+    doc = {"gap_before": {"by_order": {
+        "1x": {"mean_z2": 0.8, "n": 24, "floor_z2": 2.48, "over_floor": False},
+        "2x": {"mean_z2": 2.31, "n": 24, "floor_z2": 1.81, "over_floor": True},
+        "3x": {"mean_z2": 0.4, "n": 24, "floor_z2": None, "over_floor": False}}}}
+    html = _orders_table(doc)
+    rows = html.split("<tr>")[2:]
+    assert len(rows) == 3
+    assert rows[1] == "<td>2x</td><td>24</td><td>2.31</td><td>1.81</td><td>yes</td></tr>"
+    assert "<td>0.8</td><td>2.48</td><td>no</td>" in rows[0]
+    assert "<td>-</td>" in rows[2]  # no floor set for that order
+    assert "dimensionless" in html
+    assert _orders_table({"gap_before": {}}) == ""  # the order-domain front end has none
 
 
 @given(e0=st.floats(0.01, 100.0), left=st.floats(0.0, 1.0), log_share=st.floats(-2.0, 1.0),

@@ -36,7 +36,8 @@ from joblib import Parallel, delayed
 from .._progress import progress_bar
 
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
-           "decide", "effect_names", "log_shrink", "order_mean_z2", "orders_over_floor",
+           "decide", "effect_names", "log_shrink", "order_floors", "order_mean_z2",
+           "orders_over_floor",
            "preferred", "public_ranking", "rank", "recheck_choice", "regions_after",
            "run_parallel", "search", "setting_support", "shrink", "table_evidence"]
 
@@ -233,6 +234,13 @@ def order_mean_z2(cmp: pd.DataFrame) -> dict[str, dict]:
             for k, m, n in zip(rows.mean().index, rows.mean(), rows.size(), strict=True)}
 
 
+def order_floors(settings) -> dict[str, float]:
+    """Each :data:`TESTED_ORDERS` order's floor from ``settings.order_floors_z2``
+    (order to mean z2; empty with the floors unset)."""
+    floors = settings.order_floors_z2
+    return {} if floors is None else dict(zip(TESTED_ORDERS, floors, strict=True))
+
+
 def orders_over_floor(mean_z2: dict, settings) -> dict[str, float]:
     """The orders whose mean z2 over their held-out features (``mean_z2``: order to
     value) exceeds that order's floor in ``settings.order_floors_z2``, with the value.
@@ -243,10 +251,7 @@ def orders_over_floor(mean_z2: dict, settings) -> dict[str, float]:
     the others below the no-gap floor. Tested order by order (each floor an effect-free
     quantile with the three orders' Bonferroni share), such a sweep still goes to the
     candidates (:func:`decide`). Empty with the floors unset."""
-    floors = settings.order_floors_z2
-    if floors is None:
-        return {}
-    return {k: float(mean_z2[k]) for k, f in zip(TESTED_ORDERS, floors, strict=True)
+    return {k: float(mean_z2[k]) for k, f in order_floors(settings).items()
             if k in mean_z2 and mean_z2[k] > f}
 
 

@@ -50,12 +50,12 @@ from .calibration import (
     search_vector,
 )
 from .core import (
-    TESTED_ORDERS,
     CandidateFit,
     FrontEnd,
     alternating_split,
     conclude,
     decide,
+    order_floors,
     order_mean_z2,
     orders_over_floor,
     public_ranking,
@@ -585,13 +585,13 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     n_features = max(len(cmp0), 1)
     by_order = order_mean_z2(cmp0)
     over = orders_over_floor({k: v["mean_z2"] for k, v in by_order.items()}, settings)
-    floors = dict(zip(TESTED_ORDERS, settings.order_floors_z2 or (None,) * 3, strict=True))
+    floors = order_floors(settings)
     doc = {
         "verdict": None, "ranking": [], "where": regions(cmp_all),
         "shrink": 0.0,
         "gap_before": {"heldout_excess": E0, "per_feature": e0,
                        "rms_gap_m": float(np.sqrt(np.mean(cmp0["gap"] ** 2))),
-                       "by_order": {k: {**v, "floor_z2": floors[k], "over_floor": k in over}
+                       "by_order": {k: {**v, "floor_z2": floors.get(k), "over_floor": k in over}
                                     for k, v in by_order.items()}},
         "nuisance": {"calibrated": cal0.nuisance, "std": cal0.std},
         "noise": _noise_summary(meas),
@@ -620,7 +620,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         doc["nominal_update"]["backward_whirl_1x"] = _whirl_summary(meas)
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
-    if e0 <= settings.no_gap_per_feature and not over and not exhaustive:
+    # the verdict before any candidate: decide's own test, so the two cannot drift apart
+    if not exhaustive and decide(e0, [], settings, n_features, over) == "no-gap":
         doc["verdict"] = "no-gap"
         return result
 

@@ -217,12 +217,13 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     def heldout(z2):
         return float(np.clip(z2[held] - 2, 0, None).sum())
 
+    # the nominal model exactly as described (only the unbalance fitted)
+    nominal = Candidate(False, False)
+
     def nominal_excess(m, p):
         """Held-out excess of the effect-free rotor at bearings ``p`` on order model ``m``."""
         return heldout(evaluate(nominal, p, m)[3])
 
-    # the nominal model exactly as described (only the unbalance fitted)
-    nominal = Candidate(False, False)
     p_nom = np.log10([b0.kxx, b0.cxx])
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
     logger.info("%d revolutions in %d speed bins; calibrating the nominal rotor (steady "

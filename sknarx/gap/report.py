@@ -231,6 +231,23 @@ def _orders_text(doc) -> str:
             "the no-gap floor.")
 
 
+def _orders_table(doc) -> str:
+    """Each tested order's held-out mean z2 against its own floor, as an HTML table (empty
+    where the front end has no per-order test)."""
+    by_order = (doc.get("gap_before") or {}).get("by_order") or {}
+    rows = [[k, v["n"], f"{v['mean_z2']:.3g}",
+             "-" if v.get("floor_z2") is None else f"{v['floor_z2']:.3g}",
+             "yes" if v.get("over_floor") else "no"] for k, v in by_order.items()]
+    if not rows:
+        return ""
+    return ("<h3>Each order against its own floor</h3><p class=\"note\">Mean squared "
+            "standardised difference (z\u00b2, dimensionless) of each order's held-out "
+            "features after the nuisance calibration; a sweep under the no-gap floor goes to "
+            "the candidates when any order exceeds its own.</p>"
+            + table(rows, ["order", "held-out features", "mean z\u00b2", "floor",
+                           "over its floor"]))
+
+
 def _html(doc, figs, prov):
     verdict = doc["verdict"]
     floor = float(doc["settings"]["no_gap_per_feature"])
@@ -313,7 +330,7 @@ def _html(doc, figs, prov):
 held out {len(split['heldout_speeds'])}; {len(doc['channels'])} channel(s)
 ({html.escape(', '.join(doc['channels']))}), {quantity(doc['sampling']['fs_hz'], 'Hz')},
 {doc['sampling']['samples_per_step']} samples per step.</p>
-<h2>Where the model and the data disagree</h2>{where}
+<h2>Where the model and the data disagree</h2>{where}{_orders_table(doc)}
 <h2>Which effect explains it</h2>{which}
 {imgs}{narx}
 {_update_html(upd)}
