@@ -158,6 +158,7 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     """``benchmarks/rescore_gap_blind.py`` on the committed 25000 run: unchanged
     thresholds give the committed report's scores; a lower pair trigger changes the
     verdicts its analysis in docs/gap_validation.md names; a search setting is refused."""
+    import argparse
     import json
 
     import rescore_gap_blind as rescore
@@ -165,9 +166,11 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     report = "results/bench_gap_blind_25000_f7de2a1.json"
     committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
     evals = rescore.load(["ross", "second"], "f7de2a1")
-    # the run was decided before the breadth waiver existed
-    frozen = replace(DiagnosisSettings(), no_gap_per_feature=0.33,
-                     breadth_waived_at_floor=False)
+    # the report's own thresholds (decided before the breadth waiver, the per-order
+    # floors and today's pair thresholds existed), not the package's
+    frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+    assert (frozen.breadth_waived_at_floor, frozen.order_floors_z2) == (False, None)
+    assert (frozen.pair_trigger, frozen.pair_gain) == (0.5, 0.3)
     for fam, recs in evals.items():
         sc = blind.score(recs, frozen)
         for key in rescore.COLUMNS:
@@ -241,3 +244,37 @@ def test_the_sub_floor_gate_names_only_what_beats_every_effect_free_trial():
     assert got == ["anisotropy", "no-gap", "unexplained", "no-gap", "no-gap"]
     assert sc["top1"] == pytest.approx(1 / 3) and sc["false_alarm"] == 0.0
     assert blind.verdict(recs[0], S)[0] == "no-gap"  # the package's own decision again
+
+
+def test_the_package_pair_thresholds_decide_the_39000_run_as_stated():
+    """The pair thresholds went into the package on the 39000 run, scored after they
+    were stated (docs/gap_validation.md, *The pair rule on four runs*): decided with them
+    instead of the run's frozen ones, that run's logs change the six verdicts the record
+    names, and neither family loses a right in-library verdict, gains a false alarm or
+    loses an out-of-library ``unexplained``."""
+    import argparse
+
+    import rescore_gap_blind as rescore
+
+    report = "results/bench_gap_blind_39000_2ab591c.json"
+    frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+    assert (frozen.pair_trigger, frozen.pair_gain) == (0.5, 0.3)
+    package = DiagnosisSettings()
+    adopted = replace(frozen, pair_trigger=package.pair_trigger, pair_gain=package.pair_gain)
+    evals = rescore.load(["ross", "second"], "2ab591c,cab01af")
+    changed = set()
+    for fam, recs in evals.items():
+        assert len(recs) == {"ross": 60, "second": 68}[fam]
+        before, after = blind.score(recs, frozen), blind.score(recs, adopted)
+        changed |= {(fam, r["seed"]) for r in recs
+                    if blind.verdict(r, frozen)[0] != blind.verdict(r, adopted)[0]}
+
+        def right_in_library(sc):
+            return (sc["top1"] * sc["n_detectable_singles"]
+                    + sc["pairs_verdict"] * sc["n_detectable_pairs"])
+
+        assert right_in_library(after) >= right_in_library(before)
+        assert after["false_alarm"] <= before["false_alarm"]
+        assert after["unexplained_out_of_library"] >= before["unexplained_out_of_library"]
+    assert changed == {("ross", 39006), ("ross", 39017), ("ross", 39025), ("ross", 39032),
+                       ("second", 39002), ("second", 39022)}
