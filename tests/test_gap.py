@@ -364,6 +364,8 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     assert "narx" in doc and doc["narx"]["terms_measured"]
     html = (tmp_path / "out" / "report.html").read_text()
     assert "noise level: about" not in html  # the floor comes from the settings
+    assert "Each order against its own floor" in html
+    assert f"<td>2x</td><td>{by_order['2x']['n']}</td><td>{by_order['2x']['mean_z2']:.3g}" in html
     assert f"{doc['settings']['no_gap_per_feature']:.3g}" in html
     assert "Regenerate with" in html and doc["provenance"]["date_utc"] in html
     spread = doc["nominal_update"]["harmonic_spread"]
