@@ -217,11 +217,16 @@ def effect_parameters(effect, params) -> str:
     return "; ".join(parts)
 
 
+def _by_order(doc) -> dict:
+    """The per-order test of the gap before any effect (``gap_before.by_order``); empty
+    where the front end has none (the order-domain front end, a document without it)."""
+    return (doc.get("gap_before") or {}).get("by_order") or {}
+
+
 def _orders_text(doc) -> str:
     """The orders whose held-out features exceeded their own floor (a sweep sent to the
     candidates with its mean over every feature under the no-gap floor), as a sentence."""
-    over = {k: v for k, v in ((doc.get("gap_before") or {}).get("by_order") or {}).items()
-            if v.get("over_floor")}
+    over = {k: v for k, v in _by_order(doc).items() if v.get("over_floor")}
     if not over:
         return ""
     parts = [f"the {v['n']} held-out {k} features (mean z\u00b2 {v['mean_z2']:.3g} against "
@@ -234,10 +239,9 @@ def _orders_text(doc) -> str:
 def _orders_table(doc) -> str:
     """Each tested order's held-out mean z2 against its own floor, as an HTML table (empty
     where the front end has no per-order test)."""
-    by_order = (doc.get("gap_before") or {}).get("by_order") or {}
     rows = [[k, v["n"], f"{v['mean_z2']:.3g}",
              "-" if v.get("floor_z2") is None else f"{v['floor_z2']:.3g}",
-             "yes" if v.get("over_floor") else "no"] for k, v in by_order.items()]
+             "yes" if v.get("over_floor") else "no"] for k, v in _by_order(doc).items()]
     if not rows:
         return ""
     return ("<h3>Each order against its own floor</h3><p class=\"note\">Mean squared "
