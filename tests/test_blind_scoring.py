@@ -278,3 +278,28 @@ def test_the_package_pair_thresholds_decide_the_39000_run_as_stated():
         assert after["unexplained_out_of_library"] >= before["unexplained_out_of_library"]
     assert changed == {("ross", 39006), ("ross", 39017), ("ross", 39025), ("ross", 39032),
                        ("second", 39002), ("second", 39022)}
+
+
+def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
+    """``benchmarks/bench_gap_floor_speeds.py``: sweeps over the frozen floor are counted
+    per family and grid, each order's largest mean z2 kept, a skipped plant left out, and
+    the own family's refitted floor is the blind benchmark's recipe on that grid."""
+    import bench_gap_floor_speeds as fs
+
+    def rec(family, steps, e0, z1=0.1):
+        return {"family": family, "seed": 1, "steps": steps, "e0": e0, "n_features": 60,
+                "z2_by_order": {"1x": z1, "2x": 0.5, "3x": 0.4},
+                "verdict": "no-gap" if e0 <= S.no_gap_per_feature else "unexplained"}
+
+    own10 = [rec("own", 10, e) for e in (0.1, 0.2, 0.3)]
+    recs = [*own10, rec("own", 19, 0.12), rec("second", 19, 0.5, z1=3.0),
+            rec("second", 19, 0.2), {"family": "ross", "seed": 2, "steps": 19,
+                                     "skipped": "Newton"}]
+    got = fs.summarise(recs, S)
+    assert sorted(got) == ["own:10", "own:19", "second:19"]
+    assert got["second:19"]["over_floor"] == 1 and got["second:19"]["n"] == 2
+    assert got["second:19"]["max_z2_by_order"] == {"1x": 3.0, "2x": 0.5, "3x": 0.4}
+    assert got["second:19"]["verdicts"] == ["no-gap", "unexplained"]
+    assert got["own:10"]["refitted_floor"] == pytest.approx(
+        blind.lognormal_quantile([0.1, 0.2, 0.3], 0.99))
+    assert "refitted_floor" not in got["own:19"]  # one sweep fits no floor
