@@ -18,7 +18,8 @@ Run: ``python benchmarks/bench_gap_floor_speeds.py [--families own,second,ross]
 [--own 20] [--independent 10]`` (each trial appended to
 ``benchmarks/results/gap_floor_speeds.jsonl`` as it finishes, so a stopped run resumes;
 the table and ``benchmarks/results/bench_gap_floor_speeds.json`` at the end). One
-process; about 20 min alone on this machine.
+process; 40 min of trials on 2026-11-28 sharing this 2-core machine with the test
+suite and two blind-benchmark processes.
 """
 
 from __future__ import annotations
