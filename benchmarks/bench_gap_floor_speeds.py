@@ -33,15 +33,15 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy as np  # noqa: E402
 from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
 from bench_gap_blind import code_hash, lognormal_quantile  # noqa: E402
+from bench_gap_cost import SPEEDS_19  # noqa: E402
 from plants import families  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
 from sknarx.gap.core import order_floors  # noqa: E402
 
-GRIDS = {10: families.SPEEDS, 19: tuple(np.linspace(81.7, 276.5, 19).round(4))}
+GRIDS = {10: families.SPEEDS, 19: SPEEDS_19}  # the blind runs' grid, the cost bench's
 #: the blind benchmark's own null seeds, and effect-free seeds of the independent
 #: families that no blind run evaluates (its evaluation seeds start at 7000)
 OWN_SEED0, INDEPENDENT_SEED0 = 2000, 5000
