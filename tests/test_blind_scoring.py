@@ -167,7 +167,7 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
     evals = rescore.load(["ross", "second"], "f7de2a1")
     # the report's own thresholds (decided before the breadth waiver, the per-order
-    # floors and today's pair thresholds existed), not the package's
+    # floors existed), not the package's
     frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
     assert (frozen.breadth_waived_at_floor, frozen.order_floors_z2) == (False, None)
     assert (frozen.pair_trigger, frozen.pair_gain) == (0.5, 0.3)
@@ -246,38 +246,39 @@ def test_the_sub_floor_gate_names_only_what_beats_every_effect_free_trial():
     assert blind.verdict(recs[0], S)[0] == "no-gap"  # the package's own decision again
 
 
-def test_the_package_pair_thresholds_decide_the_39000_run_as_stated():
-    """The pair thresholds went into the package on the 39000 run, scored after they
-    were stated (docs/gap_validation.md, *The pair rule on four runs*): decided with them
-    instead of the run's frozen ones, that run's logs change the six verdicts the record
-    names, and neither family loses a right in-library verdict, gains a false alarm or
-    loses an out-of-library ``unexplained``."""
+def test_the_pair_thresholds_tried_after_the_39000_run_lose_verdicts_blind():
+    """The lower pair trigger and stricter gain (0.2, 0.5) were taken after the 39000
+    run on the rule that no family loses a right in-library verdict, then measured blind
+    on the 41000 and 43000 runs (docs/gap_validation.md, *The 43000 run*): decided with
+    the package's own-pilot thresholds instead, those two runs' logs give each family
+    more right in-library verdicts (ROSS 49 against 46, the second plant 57 against 56)
+    with the same false alarms and out-of-library verdicts, which is why the package
+    went back to them."""
     import argparse
 
     import rescore_gap_blind as rescore
 
-    report = "results/bench_gap_blind_39000_2ab591c.json"
-    frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
-    assert (frozen.pair_trigger, frozen.pair_gain) == (0.5, 0.3)
     package = DiagnosisSettings()
-    adopted = replace(frozen, pair_trigger=package.pair_trigger, pair_gain=package.pair_gain)
-    evals = rescore.load(["ross", "second"], "2ab591c,cab01af")
-    changed = set()
-    for fam, recs in evals.items():
-        assert len(recs) == {"ross": 60, "second": 68}[fam]
-        before, after = blind.score(recs, frozen), blind.score(recs, adopted)
-        changed |= {(fam, r["seed"]) for r in recs
-                    if blind.verdict(r, frozen)[0] != blind.verdict(r, adopted)[0]}
+    assert (package.pair_trigger, package.pair_gain) == (0.5, 0.3)
 
-        def right_in_library(sc):
-            return (sc["top1"] * sc["n_detectable_singles"]
-                    + sc["pairs_verdict"] * sc["n_detectable_pairs"])
+    def right_in_library(sc):
+        return round(sc["top1"] * sc["n_detectable_singles"]
+                     + sc["pairs_verdict"] * sc["n_detectable_pairs"])
 
-        assert right_in_library(after) >= right_in_library(before)
-        assert after["false_alarm"] <= before["false_alarm"]
-        assert after["unexplained_out_of_library"] >= before["unexplained_out_of_library"]
-    assert changed == {("ross", 39006), ("ross", 39017), ("ross", 39025), ("ross", 39032),
-                       ("second", 39002), ("second", 39022)}
+    totals = {}
+    for report, commits in (("results/bench_gap_blind_41000_de8b118.json", "de8b118,19293d9"),
+                            ("results/bench_gap_blind_43000_904a00e.json",
+                             "904a00e,669b3a1,e136ade")):
+        ran = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+        assert (ran.pair_trigger, ran.pair_gain) == (0.2, 0.5)
+        own = replace(ran, pair_trigger=package.pair_trigger, pair_gain=package.pair_gain)
+        for fam, recs in rescore.load(["ross", "second"], commits).items():
+            tried, back = blind.score(recs, ran), blind.score(recs, own)
+            assert back["false_alarm"] == tried["false_alarm"]
+            assert back["unexplained_out_of_library"] == tried["unexplained_out_of_library"]
+            t, b = totals.get(fam, (0, 0))
+            totals[fam] = (t + right_in_library(tried), b + right_in_library(back))
+    assert totals == {"ross": (46, 49), "second": (56, 57)}
 
 
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
