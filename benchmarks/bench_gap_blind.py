@@ -65,6 +65,17 @@ from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
 from sknarx.gap.core import TESTED_ORDERS, decide, orders_over_floor  # noqa: E402
 from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 
+#: the pair trigger every blind run searches with, whatever the package decides with:
+#: pairs are fitted wherever the best single leaves more than this per feature, so a
+#: logged run can be decided again under any trigger from here up
+#: (``rescore_gap_blind.py``)
+SEARCH_PAIR_TRIGGER = 0.2
+
+
+def search_settings():
+    """The package's settings with the blind runs' pair trigger."""
+    return replace(DiagnosisSettings(), pair_trigger=SEARCH_PAIR_TRIGGER)
+
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
 TRIAL_CODE = ("gap", "rotor")
 
@@ -604,7 +615,7 @@ def main():
     shard = tuple(int(v) for v in args.shard.split("/"))
     families = args.families.split(",")
     RESULTS.mkdir(exist_ok=True)
-    base = replace(DiagnosisSettings(), pair_trigger=0.2)
+    base = search_settings()
     print("null trials (noise floor, own family)", flush=True)
     null = run([(None, 2000 + i) for i in range(args.null)], "null", "own",
                replace(base, no_gap_per_feature=np.inf, order_floors_z2=None), shard,

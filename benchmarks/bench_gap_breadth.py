@@ -24,7 +24,6 @@ import json
 import sys
 import time
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ import bench_gap_blind as blind  # noqa: E402
 from _common import logged_eval_trial, rerun_trials  # noqa: E402
 
 import sknarx.gap.core as core  # noqa: E402
-from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
+from sknarx.gap import diagnose  # noqa: E402
 
 LOG = blind.RESULTS / "gap_breadth_split.jsonl"
 KEYS = ("effect", "shrink", "log_shrink", "heldout_gap_after", "score", "log_gain",
@@ -71,7 +70,7 @@ def run(family, seed):
                          f"{blind.RESULTS}; run bench_gap_blind.py first")
     measured, _, _, _ = blind.make_family_trial(logged["kind"], seed, family)
     # the blind run's search settings (its main's ``base``)
-    settings = replace(DiagnosisSettings(), pair_trigger=0.2)
+    settings = blind.search_settings()
     rank, core.rank = core.rank, _ranked_with_split(core.rank)
     try:
         t = time.perf_counter()

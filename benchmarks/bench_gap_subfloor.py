@@ -29,15 +29,12 @@ import argparse
 import json
 import sys
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
-from bench_gap_blind import run, score, truth_label, verdict  # noqa: E402
+from bench_gap_blind import run, score, search_settings, truth_label, verdict  # noqa: E402
 from rescore_gap_blind import COUNTS, frozen_thresholds, intervals, load  # noqa: E402
-
-from sknarx.gap import DiagnosisSettings  # noqa: E402
 
 #: the own family's effect-free trials for the gate: seeds apart from the null (2000+),
 #: pilot (1000+) and evaluation (7000+) seeds
@@ -99,7 +96,7 @@ def main():
     args = ap.parse_args()
     if args.evaluate and not args.report:
         ap.error("--evaluate needs --report (the evaluated run's frozen thresholds)")
-    base = replace(DiagnosisSettings(), pair_trigger=0.2)  # as the blind run searches
+    base = search_settings()  # as the blind run searches
     free = run([(None, FREE_SEED + i) for i in range(args.free)], "free", "own", base)
     if not free:
         ap.error("no effect-free own trials logged")

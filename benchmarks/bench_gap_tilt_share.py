@@ -31,8 +31,6 @@ import bench_gap_blind as blind  # noqa: E402
 import rescore_gap_blind as rescore  # noqa: E402
 from _common import logged_eval_trial, rerun_trials  # noqa: E402
 
-from sknarx.gap import DiagnosisSettings  # noqa: E402
-
 LOG = blind.RESULTS / "gap_tilt_share.jsonl"
 REPORT = "results/bench_gap_blind_27000_4a216b5.json"
 
@@ -57,7 +55,7 @@ def run(family, seed):
                          f"{family}:{seed}")
     t = time.perf_counter()
     kind = None if logged["kind"] == "none" else logged["kind"]  # effect-free
-    rec = blind.run_trial(kind, seed, family, replace(DiagnosisSettings(), pair_trigger=0.2))
+    rec = blind.run_trial(kind, seed, family, blind.search_settings())
     rec["seconds_total"] = time.perf_counter() - t
     rec["commit"] = blind.git_commit()
     return {"family": family, "seed": seed, "kind": logged["kind"], "logged": logged,

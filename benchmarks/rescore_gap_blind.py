@@ -40,13 +40,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, table  # noqa: E402
-from bench_gap_blind import score, secondary_rules, truth_label, verdict  # noqa: E402
+from bench_gap_blind import (  # noqa: E402
+    SEARCH_PAIR_TRIGGER,
+    score,
+    secondary_rules,
+    truth_label,
+    verdict,
+)
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
-#: the pair trigger of the blind run's search (bench_gap_blind.main's ``base``): pairs
-#: were fitted wherever the best single left more than this per feature
-SEARCH_PAIR_TRIGGER = 0.2
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
 DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
