@@ -76,6 +76,7 @@ def search_settings():
     """The package's settings with the blind runs' pair trigger."""
     return replace(DiagnosisSettings(), pair_trigger=SEARCH_PAIR_TRIGGER)
 
+
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
 TRIAL_CODE = ("gap", "rotor")
 

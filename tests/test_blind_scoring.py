@@ -27,6 +27,35 @@ def _record(kind, truth_effects, ranking, e0=10.0, effect_gap=10.0, n=100):
             "truth": {"effects": truth_effects}}
 
 
+#: the lower pair trigger and stricter gain taken after the 39000 run and taken back
+#: after the 43000 run (docs/gap_validation.md, *The 43000 run*)
+TRIED_PAIR = {"pair_trigger": 0.2, "pair_gain": 0.5}
+
+
+def _logged_run(report, commits):
+    """A committed blind run's frozen thresholds and its logged trials by family, after
+    checking that deciding those trials again gives the report's committed scores."""
+    import argparse
+    import json
+
+    import rescore_gap_blind as rescore
+
+    committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
+    frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+    evals = rescore.load(["ross", "second"], commits)
+    for fam, recs in evals.items():
+        sc = blind.score(recs, frozen)
+        for key in rescore.COLUMNS:
+            assert sc[key] == pytest.approx(committed[fam]["scores"][key]), (report, fam, key)
+    return frozen, evals
+
+
+def _right_in_library(recs, settings):
+    """How many detectable in-library trials (singles and pairs) ``settings`` decides
+    right."""
+    return sum(blind.right(r, settings) for r in recs if blind.detectable(r, settings))
+
+
 def test_a_right_name_at_the_wrong_place_scores_top1_but_not_the_place():
     at_o2 = {"rub": {"clearance": 9e-4, "stiffness": 8e6, "friction": 0.2, "at": "O2"}}
     wrong_disk = _record("rub", at_o2, [("rub", 0.97, 0.33, 4.5, {"at": "O1"})])
@@ -158,23 +187,14 @@ def test_a_logged_run_decided_again_reproduces_its_report_and_moves_with_a_thres
     """``benchmarks/rescore_gap_blind.py`` on the committed 25000 run: unchanged
     thresholds give the committed report's scores; a lower pair trigger changes the
     verdicts its analysis in docs/gap_validation.md names; a search setting is refused."""
-    import argparse
-    import json
-
     import rescore_gap_blind as rescore
 
     report = "results/bench_gap_blind_25000_f7de2a1.json"
-    committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
-    evals = rescore.load(["ross", "second"], "f7de2a1")
     # the report's own thresholds (decided before the breadth waiver, the per-order
     # floors existed), not the package's
-    frozen = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+    frozen, _ = _logged_run(report, "f7de2a1")
     assert (frozen.breadth_waived_at_floor, frozen.order_floors_z2) == (False, None)
     assert (frozen.pair_trigger, frozen.pair_gain) == (0.5, 0.3)
-    for fam, recs in evals.items():
-        sc = blind.score(recs, frozen)
-        for key in rescore.COLUMNS:
-            assert sc[key] == pytest.approx(committed[fam]["scores"][key])
     rescore.main(["--report", report, "--commit", "f7de2a1",
                   "--what-if", "pair_trigger=0.33"])
     out = capsys.readouterr().out
@@ -254,29 +274,21 @@ def test_the_pair_thresholds_tried_after_the_39000_run_lose_verdicts_blind():
     more right in-library verdicts (ROSS 49 against 46, the second plant 57 against 56)
     with the same false alarms and out-of-library verdicts, which is why the package
     went back to them."""
-    import argparse
-
-    import rescore_gap_blind as rescore
-
     package = DiagnosisSettings()
     assert (package.pair_trigger, package.pair_gain) == (0.5, 0.3)
-
-    def right_in_library(recs, settings):
-        return sum(blind.right(r, settings) for r in recs if blind.detectable(r, settings))
-
     totals = {}
     for report, commits in (("results/bench_gap_blind_41000_de8b118.json", "de8b118,19293d9"),
                             ("results/bench_gap_blind_43000_904a00e.json",
                              "904a00e,669b3a1,e136ade")):
-        ran = rescore.frozen_thresholds(report, argparse.ArgumentParser())
-        assert (ran.pair_trigger, ran.pair_gain) == (0.2, 0.5)
+        ran, evals = _logged_run(report, commits)
+        assert (ran.pair_trigger, ran.pair_gain) == tuple(TRIED_PAIR.values())
         own = replace(ran, pair_trigger=package.pair_trigger, pair_gain=package.pair_gain)
-        for fam, recs in rescore.load(["ross", "second"], commits).items():
+        for fam, recs in evals.items():
             tried, back = blind.score(recs, ran), blind.score(recs, own)
             assert back["false_alarm"] == tried["false_alarm"]
             assert back["unexplained_out_of_library"] == tried["unexplained_out_of_library"]
             t, b = totals.get(fam, (0, 0))
-            totals[fam] = (t + right_in_library(recs, ran), b + right_in_library(recs, own))
+            totals[fam] = (t + _right_in_library(recs, ran), b + _right_in_library(recs, own))
     assert totals == {"ross": (46, 49), "second": (56, 57)}
 
 
@@ -288,26 +300,16 @@ def test_the_45000_run_scored_the_package_as_it_stands_and_its_logs_reproduce_it
     the pair thresholds tried after the 39000 run gain one right in-library verdict on
     each plant there (ROSS 25 against 26, the second plant 26 against 27) -- over the
     three blind runs still none (ROSS 74 against 72, the second plant 83 against 83)."""
-    import argparse
-    import json
-
     import rescore_gap_blind as rescore
 
-    report = "results/bench_gap_blind_45000_233690b.json"
-    committed = json.loads((Path(blind.RESULTS).parent / report).read_text())["families"]
-    ran = rescore.frozen_thresholds(report, argparse.ArgumentParser())
+    ran, evals = _logged_run("results/bench_gap_blind_45000_233690b.json", "233690b,1ac0d21")
     package = DiagnosisSettings()
     for name in rescore.DECISION:
         assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
-    tried = replace(ran, pair_trigger=0.2, pair_gain=0.5)
-    counts = {}
-    for fam, recs in rescore.load(["ross", "second"], "233690b,1ac0d21").items():
-        sc = blind.score(recs, ran)
-        for key in rescore.COLUMNS:
-            assert sc[key] == pytest.approx(committed[fam]["scores"][key])
-        counts[fam] = tuple(sum(blind.right(r, s) for r in recs if blind.detectable(r, s))
-                            for s in (ran, tried))
-        assert sc["n_trials"] == {"ross": 64, "second": 68}[fam]
+    tried = replace(ran, **TRIED_PAIR)
+    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
+    counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, tried))
+              for fam, recs in evals.items()}
     assert counts == {"ross": (25, 26), "second": (26, 27)}
 
 
