@@ -329,6 +329,11 @@ def test_blind_subset_says_no_gap_on_effect_free_data():
     measured, _ = make_trial(None, 11, speeds=SPEEDS, n_samples=1000)
     d = diagnose(measured, candidates=("runout", "crack"))
     assert d["verdict"] == "no-gap"
+    # decided before any candidate, the document still says what the gap per feature
+    # was divided by (docs/gap.md, Output)
+    n = d["n_heldout_features"]
+    assert d["ranking"] == [] and n > 0
+    assert d["gap_before"]["per_feature"] * n == pytest.approx(d["gap_before"]["heldout_excess"])
 
 
 @pytest.mark.slow

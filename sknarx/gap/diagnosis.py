@@ -606,6 +606,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         "channels": list(channels),
         "settings": asdict(settings),
         "nominal_update": _update_summary(update),
+        "n_heldout_features": n_features,
     }
     if spread is not None:
         harm = (nominal_all["feature"] != "1x").to_numpy()
@@ -650,7 +651,6 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
     if isinstance(choice, dict):
         result.tables["after"] = choice["_cmp"]
-    doc["n_heldout_features"] = n_features
     doc["ranking"] = public_ranking(ranked)
     return result
 
