@@ -42,6 +42,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     SEARCH_PAIR_TRIGGER,
+    detectable,
+    names_of,
+    right,
     score,
     secondary_rules,
     truth_label,
@@ -53,7 +56,8 @@ from sknarx.gap import DiagnosisSettings  # noqa: E402
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
 DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
-            "breadth_waived_at_floor", "pair_trigger", "pair_gain", "pair_margin")
+            "breadth_waived_at_floor", "pair_trigger", "pair_gain", "pair_margin",
+            "pair_rival_shrink")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -66,7 +70,8 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
 
 
 def _value(name: str, text: str):
-    """A decision setting's value: a float (``pair_margin`` also None), the one switch
+    """A decision setting's value: a float (``pair_margin`` and ``pair_rival_shrink``
+    also None), the one switch
     ``breadth_waived_at_floor`` True or False, ``order_floors_z2`` three comma-separated
     floats (1x, 2x, 3x) or None."""
     if name == "breadth_waived_at_floor":
@@ -121,10 +126,12 @@ def frozen_thresholds(path, ap):
     """The frozen thresholds of a ``bench_gap_blind`` JSON report (see :func:`_report`)."""
     thresholds = _report(path, ap)["thresholds"]
     known = {f.name for f in fields(DiagnosisSettings)}
-    # a report written before the breadth waiver existed was decided without it, and
-    # one written before the per-order floors without them
+    # a report written before the breadth waiver existed was decided without it, one
+    # written before the per-order floors without them, and one written before the
+    # rival-pair test without it
     thresholds.setdefault("breadth_waived_at_floor", False)
     thresholds.setdefault("order_floors_z2", None)
+    thresholds.setdefault("pair_rival_shrink", None)
     if thresholds["order_floors_z2"] is not None:  # a JSON list
         thresholds["order_floors_z2"] = tuple(thresholds["order_floors_z2"])
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})
@@ -154,6 +161,36 @@ def load(families, commit):
     return out
 
 
+def pair_statistics(recs, s):
+    """Each pair verdict ``s`` gives on a detectable in-library trial, with what the
+    search knew when it chose the pair: how much the best single leaves per feature,
+    the pair's share of that, its score gain (AIC) and the share of the held-out gap
+    its weaker member removes alone (``shrink``; None where a member was not fitted
+    alone). ``kind``: ``right``, ``rival`` (the truth is a single, named in the pair) or
+    ``wrong``."""
+    rows = []
+    for r in recs:
+        got = verdict(r, s)[0]
+        if not detectable(r, s) or not isinstance(got, list):
+            continue
+        singles = [x for x in r["ranking"] if len(names_of(x["effect"])) <= 1]
+        pair = min((x for x in r["ranking"] if len(names_of(x["effect"])) == 2),
+                   key=lambda x: x["score"])
+        best = min(singles, key=lambda x: x["score"])
+        alone = {names_of(x["effect"])[0]: x["shrink"] for x in singles
+                 if names_of(x["effect"])}
+        weaker = [alone.get(m) for m in names_of(pair["effect"])]
+        truth = truth_label(r, s)
+        rows.append({
+            "seed": r["seed"], "truth": truth, "verdict": got,
+            "kind": ("right" if right(r, s) else
+                     "rival" if isinstance(truth, str) and truth in got else "wrong"),
+            "single_left_per_feature": best["E"] / r["n_features"],
+            "pair_share": pair["E"] / best["E"], "score_gain": best["score"] - pair["score"],
+            "weaker_alone": None if None in weaker else min(weaker)})
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--report", required=True,
@@ -164,6 +201,9 @@ def main(argv=None):
     ap.add_argument("--what-if", action="append", default=[], metavar="NAME=VALUE",
                     help="a changed threshold (repeatable)")
     ap.add_argument("--families", default="ross,second")
+    ap.add_argument("--pairs", action="store_true",
+                    help="also list every pair verdict (under the what-if thresholds) with "
+                    "what the search knew when it chose it (pair_statistics)")
     args = ap.parse_args(argv)
     frozen = frozen_thresholds(args.report, ap)
     changes = {}
@@ -175,9 +215,9 @@ def main(argv=None):
         try:
             changes[name] = _value(name, text)
         except ValueError:
-            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin, "
-                     "True or False for breadth_waived_at_floor, three comma-separated "
-                     "numbers or None for order_floors_z2)")
+            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin "
+                     "or pair_rival_shrink, True or False for breadth_waived_at_floor, "
+                     "three comma-separated numbers or None for order_floors_z2)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
@@ -187,12 +227,13 @@ def main(argv=None):
         ap.error(f"no logged evaluation trials of commit {args.commit!r} in {RESULTS}")
     rows, changed, counted = [], [], []
     for fam, recs in evals.items():
-        sc = score(recs, frozen)
-        counted += [[fam, key, f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"]
-                    for key, k, n, lo, hi in intervals(sc)]
         for label, s in (("frozen", frozen), ("what-if", other)):
             sc = score(recs, s)
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
+            if label == "frozen" or changes:  # counts to pool runs by, under either
+                counted += [[fam, f"{key}{'' if label == 'frozen' else ' (what-if)'}",
+                             f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"]
+                            for key, k, n, lo, hi in intervals(sc)]
         for r in recs:
             a, b = verdict(r, frozen)[0], verdict(r, other)[0]
             if a != b:
@@ -208,12 +249,22 @@ def main(argv=None):
     print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")
     table(rows, ["family", "thresholds", "trials", *COLUMNS])
     print()
-    table(counted, ["family", "rate (frozen)", "k/n", "rate", "95 % interval (Wilson)"])
+    table(counted, ["family", "rate (frozen unless said)", "k/n", "rate",
+                    "95 % interval (Wilson)"])
     print()
     if changed:
         table(changed, ["family", "seed", "truth", "frozen verdict", "what-if verdict"])
     else:
         print("no verdict changes")
+    if args.pairs:
+        print()
+        table([[fam, p["seed"], json.dumps(p["truth"]), json.dumps(p["verdict"]), p["kind"],
+                f"{p['single_left_per_feature']:.3g}", f"{p['pair_share']:.2f}",
+                f"{p['score_gain']:.0f}",
+                "-" if p["weaker_alone"] is None else f"{p['weaker_alone']:.2f}"]
+               for fam, recs in evals.items() for p in pair_statistics(recs, other)],
+              ["family", "seed", "truth", "pair verdict (what-if)", "kind",
+               "single leaves /feature", "pair's share", "AIC gain", "weaker alone"])
 
 
 if __name__ == "__main__":

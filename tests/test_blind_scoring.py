@@ -2,6 +2,7 @@
 what counts as right, where it is placed, which misses the update made. Records are
 written by hand in the logged format; nothing is simulated."""
 
+import json
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -292,26 +293,35 @@ def test_the_pair_thresholds_tried_after_the_39000_run_lose_verdicts_blind():
     assert totals == {"ross": (46, 49), "second": (56, 57)}
 
 
-def test_the_45000_run_scored_the_package_as_it_stands_and_its_logs_reproduce_it():
-    """The 45000 run is the blind measure of the package as it now stands
-    (docs/gap_validation.md, *The 45000 run*): its report's decision thresholds are the
-    package's (the floors refitted on the same 20 null trials equal the frozen ones to
-    the stated digits), its logged trials decided again give the committed scores, and
-    the pair thresholds tried after the 39000 run gain one right in-library verdict on
-    each plant there (ROSS 25 against 26, the second plant 26 against 27) -- over the
-    three blind runs still none (ROSS 74 against 72, the second plant 83 against 83)."""
+def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_reproduce_it():
+    """The 45000 run is the blind measure of the package as it stood before the
+    rival-pair test (docs/gap_validation.md, *The 45000 run*): its report's decision
+    thresholds are the package's but for that test (not there then), its logged trials
+    decided again give the committed scores, and the pair thresholds tried after the
+    39000 run gain one right in-library verdict on each plant there (ROSS 25 against 26,
+    the second plant 26 against 27) -- over the three blind runs still none (ROSS 74
+    against 72, the second plant 83 against 83). The package's rival-pair test
+    (``pair_rival_shrink``) on its logs turns two pairs into their right single (ROSS
+    crack 45008, the second plant's rub 45001) and changes no other verdict."""
     import rescore_gap_blind as rescore
 
     ran, evals = _logged_run("results/bench_gap_blind_45000_233690b.json", "233690b,1ac0d21")
     package = DiagnosisSettings()
-    for name in rescore.DECISION:
+    assert ran.pair_rival_shrink is None and package.pair_rival_shrink is not None
+    for name in set(rescore.DECISION) - {"pair_rival_shrink"}:
         assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
     tried = replace(ran, **TRIED_PAIR)
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
     counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, tried))
               for fam, recs in evals.items()}
     assert counts == {"ross": (25, 26), "second": (26, 27)}
-
+    rival = replace(ran, pair_rival_shrink=package.pair_rival_shrink)
+    changed = {(fam, r["seed"], json.dumps(blind.verdict(r, rival)[0]))
+               for fam, recs in evals.items() for r in recs
+               if blind.verdict(r, ran)[0] != blind.verdict(r, rival)[0]}
+    assert changed == {("ross", 45008, '"crack"'), ("second", 45001, '"rub"')}
+    assert {fam: _right_in_library(recs, rival) for fam, recs in evals.items()} == {
+        "ross": 26, "second": 27}
 
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
     """``benchmarks/bench_gap_floor_speeds.py``: sweeps over the frozen floor are counted
@@ -336,3 +346,22 @@ def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
     assert got["own:10"]["refitted_floor"] == pytest.approx(
         blind.lognormal_quantile([0.1, 0.2, 0.3], 0.99))
     assert "refitted_floor" not in got["own:19"]  # one sweep fits no floor
+
+
+def test_pair_statistics_name_a_rival_pair_and_its_weaker_members_share():
+    """``rescore_gap_blind.pair_statistics``: a rub named as rub + crack, where the crack
+    alone removes 0.97, is a ``rival`` pair whose weaker member removes 0.97 alone; the
+    rival-pair test then names the rub."""
+    import rescore_gap_blind as rescore
+
+    rec = _record("rub", {"rub": {"at": "O1"}},
+                  [(["rub", "crack"], 0.999, 0.9, 0.5, [{"at": "O1"}, {}]),
+                   ("rub", 0.99, 0.6, 3.0, {"at": "O1"}), ("crack", 0.97, 0.3, 9.0, {})])
+    off = replace(S, pair_trigger=0.5, pair_gain=0.3, pair_rival_shrink=None)
+    (row,) = rescore.pair_statistics([rec], off)
+    assert (row["kind"], row["verdict"], row["weaker_alone"]) == (
+        "rival", ["crack", "rub"], 0.97)
+    assert row["single_left_per_feature"] == pytest.approx(3.0)
+    assert row["pair_share"] == pytest.approx(0.5 / 3.0)
+    assert blind.verdict(rec, replace(off, pair_rival_shrink=0.8))[0] == "rub"
+    assert rescore.pair_statistics([rec], replace(off, pair_rival_shrink=0.8)) == []

@@ -551,6 +551,51 @@ def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes
     assert decide(50.0, [single, pair], strict, 100)["effect"] == "runout"
 
 
+def test_a_pair_of_rival_readings_gives_way_to_the_better_of_them():
+    """Two candidates that each remove most of the held-out gap alone are rival readings
+    of one signature (a rub and a crack on an independent plant's rub): the pair is not
+    named, the better single is. A pair whose weaker member alone removes less than
+    ``pair_rival_shrink`` -- a true pair's partner seldom explains much on its own -- or
+    one of whose members was never fitted alone, is decided as before."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide, rivals
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5,
+                          pair_trigger=1.0, pair_gain=0.5, pair_rival_shrink=0.8)
+    rub = _entry(["rub"], 300.0, 0.99, 0.6)  # leaves 3 per feature
+    crack = _entry(["crack"], 900.0, 0.97, 0.3)  # alone removes 0.97
+    pair = _entry(["rub", "crack"], 20.0, 0.999, 0.95)
+    assert rivals(pair, [rub, crack], 0.8)
+    assert decide(50.0, [rub, crack, pair], s, 100)["effect"] == "rub"
+    assert decide(50.0, [rub, crack, pair], replace(s, pair_rival_shrink=None),
+                  100)["effect"] == ["rub", "crack"]
+    partner = _entry(["crack"], 20000.0, 0.5, 0.1)  # alone removes half: no rival
+    assert decide(50.0, [rub, partner, pair], s, 100)["effect"] == ["rub", "crack"]
+    assert decide(50.0, [rub, pair], s, 100)["effect"] == ["rub", "crack"]  # not fitted
+
+
+@given(st.lists(st.tuples(st.sampled_from(["rub", "crack", "runout", "clearance"]),
+                          st.floats(1.0, 5000.0), st.floats(-1.0, 1.0)),
+                min_size=1, max_size=4, unique_by=lambda t: t[0]),
+       st.floats(1.0, 5000.0), st.floats(0.0, 1.0))
+def test_the_rival_test_only_ever_turns_a_pair_into_the_best_single(singles, pair_E, share):
+    """Whatever the fits, the rival-pair test changes a verdict only from a pair to the
+    best single (it never names another pair, and never touches a single verdict)."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import preferred
+
+    entries = [_entry([n], E, sh, 0.5) for n, E, sh in singles]
+    names = [n for n, _, _ in singles][:2]
+    if len(names) == 2:
+        entries.append(_entry(names, pair_E, 0.9, 0.5))
+    s = DiagnosisSettings(pair_trigger=0.5, pair_gain=0.3, pair_rival_shrink=share)
+    with_test = preferred(entries, s, 100)
+    without = preferred(entries, replace(s, pair_rival_shrink=None), 100)
+    best = min((e for e in entries if isinstance(e["effect"], str)), key=lambda e: e["score"])
+    assert with_test is without or (isinstance(without["effect"], list)
+                                     and with_test is best)
+
+
 def _given_fit(names, E, n_params, model_error=None):
     """A candidate fit with a held-out table of 100 features sharing ``E`` equally."""
     from sknarx.gap.core import CandidateFit

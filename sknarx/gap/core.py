@@ -207,8 +207,9 @@ def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
 def preferred(ranking: list, settings, n_features: int):
     """The best single candidate, or the best pair where it earns its place: the single
     leaves more than ``pair_trigger`` excess per feature, the pair removes
-    ``pair_gain`` of what the single leaves and (with ``pair_margin`` set) scores at
-    least that much below it. None without any single."""
+    ``pair_gain`` of what the single leaves, (with ``pair_margin`` set) scores at
+    least that much below it and (with ``pair_rival_shrink`` set) its members are not
+    rivals (:func:`rivals`). None without any single."""
     # a candidate left with model error only competes as a single would
     singles = [r for r in ranking if len(effect_names(r)) <= 1]
     pairs = [r for r in ranking if len(effect_names(r)) == 2]
@@ -220,9 +221,21 @@ def preferred(ranking: list, settings, n_features: int):
         pb = min(pairs, key=lambda r: r["score"])
         margin = settings.pair_margin
         if (pb["heldout_gap_after"] <= (1.0 - settings.pair_gain) * left
-                and (margin is None or best["score"] - pb["score"] >= margin)):
+                and (margin is None or best["score"] - pb["score"] >= margin)
+                and not rivals(pb, singles, settings.pair_rival_shrink)):
             return pb
     return best
+
+
+def rivals(pair: dict, singles: list, share: float | None) -> bool:
+    """Whether each member of ``pair``, fitted alone (its entry among ``singles``),
+    removes at least ``share`` of the held-out gap: two rival readings of one signature,
+    not two effects (see ``DiagnosisSettings.pair_rival_shrink``). A member not fitted
+    alone is no rival; ``share`` None: never."""
+    if share is None:
+        return False
+    alone = {effect_names(r)[0]: r["shrink"] for r in singles if effect_names(r)}
+    return all(alone.get(name, -np.inf) >= share for name in effect_names(pair))
 
 
 def order_mean_z2(cmp: pd.DataFrame) -> dict[str, dict]:

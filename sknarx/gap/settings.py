@@ -52,6 +52,16 @@ class DiagnosisSettings:
     # ... and score (AIC: held-out excess + 2 per parameter) this much below it; None: the
     # gain alone decides
     pair_margin: float | None = None
+    # ... and not both of its members, each fitted alone, remove this share of the
+    # held-out gap: two candidates that each explain most of it are rival readings of
+    # one signature, and together they fit what the lead's form leaves of a rotor it
+    # does not describe exactly -- on both independent plants a rub came out as rub +
+    # crack (the crack alone removing 0.84-0.99) and a crack as crack + misalignment --
+    # while a true pair's weaker member alone removed at most 0.69 on the eight blind
+    # runs 31000-45000. Chosen on those runs' logs (0.7-0.9 gain the same; the middle
+    # taken) and then scored on fresh seeds (docs/gap_validation.md, *The 47000 run*);
+    # None: no such test
+    pair_rival_shrink: float | None = 0.8
     n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
     # Sobol settings of a candidate's parameters scored before its local runs: a rub's
@@ -119,4 +129,5 @@ class DiagnosisSettings:
 #: on their own; 300 bootstrap draws.
 ORDER_DOMAIN_SETTINGS = DiagnosisSettings(
     no_gap_per_feature=0.0, order_floors_z2=None, min_shrink=0.5, min_log_shrink=0.0,
-    pair_trigger=0.0, pair_gain=0.0, pair_margin=10.0, n_bootstrap=300, seed=0)
+    pair_trigger=0.0, pair_gain=0.0, pair_margin=10.0, pair_rival_shrink=None,
+    n_bootstrap=300, seed=0)
