@@ -574,6 +574,38 @@ def test_a_pair_of_rival_readings_gives_way_to_the_better_of_them():
     assert decide(50.0, [rub, pair], s, 100)["effect"] == ["rub", "crack"]  # not fitted
 
 
+def test_a_pair_set_aside_as_rivals_is_stated_beside_the_verdict():
+    """Where the rival test named the single, the document says which pair it set aside
+    and what each member removes alone (``rival_pair``), and the report says why; where
+    it changed nothing (no rivals, or the test off), neither says anything."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import conclude, rival_pair_set_aside
+    from sknarx.gap.report import _rival_text
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.7, min_log_shrink=0.5,
+                          pair_trigger=1.0, pair_gain=0.5, pair_rival_shrink=0.8,
+                          n_bootstrap=20)
+    rub = _entry(["rub"], 300.0, 0.99, 0.6)
+    crack = _entry(["crack"], 900.0, 0.97, 0.3)
+    pair = _entry(["rub", "crack"], 20.0, 0.999, 0.95)
+    ranking = [pair, rub, crack]
+    aside = rival_pair_set_aside(ranking, s, 100)
+    assert aside["effect"] == ["rub", "crack"]
+    assert aside["members_alone"] == {"rub": 0.99, "crack": 0.97}
+    assert rival_pair_set_aside(ranking, replace(s, pair_rival_shrink=None), 100) is None
+    assert rival_pair_set_aside([pair, rub, _entry(["crack"], 9e4, 0.3, 0.1)], s, 100) is None
+    cmp0 = pd.DataFrame({"speed": np.repeat(np.arange(10.0), 10), "excess": 5.0,
+                         "gap": 1e-6, "window": "steady", "channel": "xA", "feature": "1x"})
+    chosen = {**rub, "_cmp": cmp0.assign(excess=0.05)}
+    doc = conclude(chosen, [pair, chosen, crack], cmp0, [], s)
+    assert doc["verdict"] == "rub" and doc["rival_pair"]["effect"] == ["rub", "crack"]
+    text = _rival_text(doc)
+    assert "rub + crack removed more (100 %)" in text
+    assert "at least 80 %" in text and "rub 99 %, crack 97 %" in text
+    assert "rival_pair" not in conclude(chosen, [chosen, crack], cmp0, [], s)
+    assert _rival_text({"verdict": "rub"}) == ""
+
+
 @given(st.lists(st.tuples(st.sampled_from(["rub", "crack", "runout", "clearance"]),
                           st.floats(1.0, 5000.0), st.floats(-1.0, 1.0)),
                 min_size=1, max_size=4, unique_by=lambda t: t[0]),

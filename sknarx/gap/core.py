@@ -26,7 +26,7 @@ both:
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -225,6 +225,24 @@ def preferred(ranking: list, settings, n_features: int):
                 and not rivals(pb, singles, settings.pair_rival_shrink)):
             return pb
     return best
+
+
+def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | None:
+    """The ranking's entry for the pair :func:`preferred` would have named but for the
+    rival test (``settings.pair_rival_shrink``), with what each member removes alone
+    (``members_alone``); None where the test changed nothing."""
+    if settings.pair_rival_shrink is None:
+        return None
+    plain = preferred(ranking, replace(settings, pair_rival_shrink=None), n_features)
+    if (plain is None or len(effect_names(plain)) != 2
+            or preferred(ranking, settings, n_features) is plain):
+        return None
+    alone = {effect_names(r)[0]: r["shrink"] for r in ranking
+             if len(effect_names(r)) == 1}
+    return {"effect": plain["effect"], "shrink": plain["shrink"],
+            "heldout_gap_after": plain["heldout_gap_after"],
+            "members_alone": {name: alone[name] for name in effect_names(plain)},
+            "pair_rival_shrink": settings.pair_rival_shrink}
 
 
 def rivals(pair: dict, singles: list, share: float | None) -> bool:
@@ -491,16 +509,20 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -
     and with a verdict its bootstrap band, the gap after and each region before and
     after; ``model_error`` where the chosen candidate carries one (the linear form of a
     member that was no effect, see :func:`search`) and ``setting_decided`` where it has
-    discrete settings (see :func:`setting_support`)."""
+    discrete settings (see :func:`setting_support`); ``rival_pair`` where a pair would
+    have been named but for the rival test (:func:`rival_pair_set_aside`)."""
     if choice == "no-gap":
         return {"verdict": "no-gap", "shrink": 0.0}
+    aside = rival_pair_set_aside(ranking, settings, max(len(cmp0), 1))
+    rival = {"rival_pair": aside} if aside is not None else {}
     if choice is None:
         return {"verdict": "unexplained",
-                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0}
+                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0, **rival}
     cmp = choice["_cmp"]
     gap_after = {"heldout_excess": choice["heldout_gap_after"],
                  "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))}
     extra = {"model_error": choice["model_error"]} if choice.get("model_error") else {}
+    extra.update(rival)
     if not effect_names(choice):  # model error alone explains the gap: no effect
         return {"verdict": "no-gap", "shrink": 0.0, "gap_after": gap_after, **extra}
     if "setting_decided" in choice:

@@ -172,6 +172,21 @@ def _undecided_text(doc) -> str:
             "resamples of the held-out speeds (see the ranking's evidence).")
 
 
+def _rival_text(doc) -> str:
+    """The verdict's note where the rival test set a pair aside
+    (``sknarx.gap.core.rival_pair_set_aside``)."""
+    aside = doc.get("rival_pair")
+    if not aside:
+        return ""
+    alone = ", ".join(f"{name} {100 * float(v):.0f} %"
+                      for name, v in aside["members_alone"].items())
+    return (f" The pair {_label(aside['effect'])} removed more "
+            f"({100 * float(aside['shrink']):.0f} %), but each of its members alone removes "
+            f"at least {100 * float(aside['pair_rival_shrink']):.0f} % of the gap ({alone}): "
+            "two rival readings of one signature, not two effects, so the pair is not "
+            "named.")
+
+
 def _linear_form_text(entry) -> str:
     """What the effect-or-model-error test (``sknarx.gap.core.search``, step 4) found for
     a ranking entry: the candidate it replaced, or the linear forms it beat."""
@@ -276,7 +291,7 @@ def _html(doc, figs, prov):
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
                     "a nominal model further from the rig than the nuisance scalars allow."
-                    + _orders_text(doc))
+                    + _orders_text(doc) + _rival_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
@@ -286,7 +301,7 @@ def _html(doc, figs, prov):
                     f"the no-gap floor {floor:.3g}."
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
-                    + _orders_text(doc) + _undecided_text(doc))
+                    + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
