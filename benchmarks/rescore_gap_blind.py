@@ -52,6 +52,7 @@ from bench_gap_blind import (  # noqa: E402
 )
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
+from sknarx.gap.core import shrinks_alone  # noqa: E402
 
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
@@ -177,8 +178,7 @@ def pair_statistics(recs, s):
         pair = min((x for x in r["ranking"] if len(names_of(x["effect"])) == 2),
                    key=lambda x: x["score"])
         best = min(singles, key=lambda x: x["score"])
-        alone = {names_of(x["effect"])[0]: x["shrink"] for x in singles
-                 if names_of(x["effect"])}
+        alone = shrinks_alone(r["ranking"])
         weaker = [alone.get(m) for m in names_of(pair["effect"])]
         truth = truth_label(r, s)
         rows.append({

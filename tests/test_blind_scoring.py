@@ -37,7 +37,6 @@ def _logged_run(report, commits):
     """A committed blind run's frozen thresholds and its logged trials by family, after
     checking that deciding those trials again gives the report's committed scores."""
     import argparse
-    import json
 
     import rescore_gap_blind as rescore
 

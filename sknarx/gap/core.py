@@ -237,12 +237,17 @@ def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | Non
     if (plain is None or len(effect_names(plain)) != 2
             or preferred(ranking, settings, n_features) is plain):
         return None
-    alone = {effect_names(r)[0]: r["shrink"] for r in ranking
-             if len(effect_names(r)) == 1}
+    alone = shrinks_alone(ranking)
     return {"effect": plain["effect"], "shrink": plain["shrink"],
             "heldout_gap_after": plain["heldout_gap_after"],
             "members_alone": {name: alone[name] for name in effect_names(plain)},
             "pair_rival_shrink": settings.pair_rival_shrink}
+
+
+def shrinks_alone(ranking: list) -> dict[str, float]:
+    """The share of the held-out gap each effect fitted alone removes (its single entry
+    in ``ranking``), by name."""
+    return {effect_names(r)[0]: r["shrink"] for r in ranking if len(effect_names(r)) == 1}
 
 
 def rivals(pair: dict, singles: list, share: float | None) -> bool:
@@ -252,7 +257,7 @@ def rivals(pair: dict, singles: list, share: float | None) -> bool:
     alone is no rival; ``share`` None: never."""
     if share is None:
         return False
-    alone = {effect_names(r)[0]: r["shrink"] for r in singles if effect_names(r)}
+    alone = shrinks_alone(singles)
     return all(alone.get(name, -np.inf) >= share for name in effect_names(pair))
 
 
