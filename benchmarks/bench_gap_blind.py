@@ -62,7 +62,12 @@ from plants.families import (  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
-from sknarx.gap.core import TESTED_ORDERS, decide, orders_over_floor  # noqa: E402
+from sknarx.gap.core import (  # noqa: E402
+    TESTED_ORDERS,
+    decide,
+    effect_names,
+    orders_over_floor,
+)
 from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 
 #: the pair trigger every blind run searches with, whatever the package decides with:
@@ -241,10 +246,6 @@ def with_member_gaps(recs):
     return out
 
 
-def names_of(effect):
-    return (effect,) if isinstance(effect, str) else tuple(effect)
-
-
 @dataclass(frozen=True)
 class NoiseReferencedShrink:
     """A secondary verdict rule, scored beside the package's and never instead of it:
@@ -309,7 +310,7 @@ def verdict(rec, s, rule=None):
         return "no-gap", 0.0
     if choice is None:
         return "unexplained", 0.0
-    names = names_of(choice["effect"])
+    names = effect_names(choice)
     if not names:  # model error alone (an isotropic support): no effect
         return "no-gap", 0.0
     return (names[0] if len(names) == 1 else sorted(names)), choice["shrink"]
@@ -409,7 +410,7 @@ def separable(rec, s):
     n = rec["n_features"]
     single = {}
     for r in rec["ranking"]:
-        names = names_of(r["effect"])
+        names = effect_names(r)
         if len(names) == 1:
             single.setdefault(names[0], r["E"] / n)
     return all(single.get(p, np.inf) > s.no_gap_per_feature
@@ -431,7 +432,7 @@ def within_noise_of_library(rec, s):
 
 
 def top2_names(rec):
-    return {n for r in rec["ranking"][:2] for n in names_of(r["effect"])}
+    return {n for r in rec["ranking"][:2] for n in effect_names(r)}
 
 
 def score(recs, s, rule=None):

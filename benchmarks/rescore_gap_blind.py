@@ -43,7 +43,6 @@ from _common import RESULTS, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     SEARCH_PAIR_TRIGGER,
     detectable,
-    names_of,
     right,
     score,
     secondary_rules,
@@ -52,7 +51,7 @@ from bench_gap_blind import (  # noqa: E402
 )
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
-from sknarx.gap.core import shrinks_alone  # noqa: E402
+from sknarx.gap.core import effect_names, shrinks_alone  # noqa: E402
 
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
@@ -174,12 +173,12 @@ def pair_statistics(recs, s):
         got = verdict(r, s)[0]
         if not detectable(r, s) or not isinstance(got, list):
             continue
-        singles = [x for x in r["ranking"] if len(names_of(x["effect"])) <= 1]
-        pair = min((x for x in r["ranking"] if len(names_of(x["effect"])) == 2),
+        singles = [x for x in r["ranking"] if len(effect_names(x)) <= 1]
+        pair = min((x for x in r["ranking"] if len(effect_names(x)) == 2),
                    key=lambda x: x["score"])
         best = min(singles, key=lambda x: x["score"])
         alone = shrinks_alone(r["ranking"])
-        weaker = [alone.get(m) for m in names_of(pair["effect"])]
+        weaker = [alone.get(m) for m in effect_names(pair)]
         truth = truth_label(r, s)
         rows.append({
             "seed": r["seed"], "truth": truth, "verdict": got,
