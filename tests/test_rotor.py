@@ -211,20 +211,21 @@ def test_every_combination_of_built_in_effects_runs_one_compiled_integrator():
     # numba compiles the integrator anew for each kernel it is handed (about 5 s a
     # time): the package's own kernels go in as one program of one dispatcher, so a
     # search over effects and pairs compiles it once; a user's kernel is chained after
-    from sknarx.rotor.effects import _builtin_forces, compose_force_kernels
-    from sknarx.rotor.integrator import integrate
+    from sknarx.rotor.effects import builtin_forces, compose_force_kernels
+    from sknarx.rotor.integrator import _integrate_builtin, _integrate_hooked
     from sknarx.testing import ThermalBow
 
     kw = dict(fs=1000.0, n_samples=200, settle=0.1)
     effects = [R.BreathingCrack(depth=0.3), R.Rub(clearance=2e-4),
                R.Misalignment(parallel=2e-4), R.JointLooseness(residual=0.01, gap=1e-6)]
     R.RotorBearingSimulator(effects=effects[:1]).simulate_columns(150.0, **kw)
-    compiled = len(integrate.signatures)
+    compiled = len(_integrate_builtin.signatures), len(_integrate_hooked.signatures)
+    assert compiled[0] == 1
     for combo in ([], effects[1:2], effects[2:4], effects):
         sim = R.RotorBearingSimulator(effects=combo)
-        assert sim._setup.kernel is _builtin_forces
+        assert sim._setup.kernel is builtin_forces
         sim.simulate_columns(150.0, **kw)
-    assert len(integrate.signatures) == compiled
+    assert (len(_integrate_builtin.signatures), len(_integrate_hooked.signatures)) == compiled
 
     # the program adds what each kernel adds on its own; a user's kernel is added too
     ctx = R.RotorBearingSimulator()._setup.context
@@ -241,6 +242,26 @@ def test_every_combination_of_built_in_effects_runs_one_compiled_integrator():
     assert np.any(alone != 0.0)
     np.testing.assert_allclose(forces(*compose_force_kernels(parts)), alone,
                                rtol=1e-12, atol=1e-12 * np.max(np.abs(alone)))
+
+
+def test_a_new_process_loads_the_built_in_integrator_from_numbas_cache(tmp_path):
+    # the RK-4 loop with the package's own forces is cached on disk: a process that
+    # simulates does not compile it again (it once cost every test worker, CLI start and
+    # benchmark process 10-30 s); a hook passed by value would forbid the cache
+    import subprocess
+    import sys
+
+    script = (
+        "import sknarx.rotor as R\n"
+        "from sknarx.rotor.integrator import _integrate_builtin as f\n"
+        "R.RotorBearingSimulator(effects=[R.Rub(clearance=2e-4)]).simulate_columns("
+        "150.0, fs=1000.0, n_samples=50, settle=0.05)\n"
+        "print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))\n"
+    )
+    runs = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                           check=True, cwd=tmp_path).stdout.split()[-2:] for _ in range(2)]
+    # the first may compile (a cold cache) and save; the second must load
+    assert runs[1] == ["1", "0"], runs
 
 
 def test_measurement_effects_runout_and_noise():

@@ -707,7 +707,7 @@ SupportAnisotropy.linear_form = SupportFlexibility
 
 
 @njit(nogil=True, cache=True)
-def _builtin_forces(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
+def builtin_forces(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
     # p is a force program: the number of kernels, then (code, size, parameters) of
     # each, the code indexing _BUILTIN_KERNELS
     i = 1
@@ -725,14 +725,14 @@ def _builtin_forces(t, phi, omega, alpha, q, v, p, out):  # pragma: no cover
         i += 2 + size
 
 
-#: the kernels :func:`_builtin_forces` dispatches to, in the order of their codes
+#: the kernels :func:`builtin_forces` dispatches to, in the order of their codes
 _BUILTIN_KERNELS = (_rub_kernel, _misalignment_kernel, _crack_kernel, _looseness_kernel)
 
 
 def compose_force_kernels(kernels):
     """One kernel that adds the forces of every ``(kernel, params)``; its parameters.
 
-    The package's own kernels become one program of :func:`_builtin_forces`, the same
+    The package's own kernels become one program of :func:`builtin_forces`, the same
     compiled function whatever the effects: numba compiles the integrator anew for
     each distinct kernel it is handed (about 5 s a time), so a search over effects and
     their pairs would otherwise compile once per combination. Other kernels (an
@@ -748,8 +748,8 @@ def compose_force_kernels(kernels):
         else:
             custom.append((kernel, p))
     if not custom:
-        return _builtin_forces, np.array(program)
-    funcs = (_builtin_forces, *(k for k, _ in custom))
+        return builtin_forces, np.array(program)
+    funcs = (builtin_forces, *(k for k, _ in custom))
     sizes = (len(program), *(p.size for _, p in custom))
     return _chain(funcs, sizes), np.concatenate([program, *(p for _, p in custom)])
 

@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from .bearings import ball_pitch, bearing_force_at, cage_angle
+from .effects import builtin_forces
 
 __all__ = ["integrate"]
 
@@ -82,15 +83,15 @@ def _accel(t, phi, w, al, q, v, minv, Ct, Gt, Kt, fg, unb, brg, pitch, trig, ext
         acc[i] *= minv[i]
 
 
-@njit(nogil=True)
 def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb,
-              brg, extra, eparams, limit):  # pragma: no cover
+              brg, extra, eparams, limit):
     """Integrate over ``len(omega) - 1`` sample intervals.
 
     Parameters
     ----------
     omega : (n + 1,) speed at each sample instant, rad/s (linear in between).
     record_from : first sample index that is recorded.
+    extra, eparams : the force hook and its parameters (see the module's docstring).
     limit : a generalised coordinate beyond this magnitude counts as divergence.
 
     Returns
@@ -101,6 +102,37 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
     status : -1, or the sample index at which the solution diverged.
     q, v : (ndof,) the state at the last sample (to continue a run from).
     """
+    args = (q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb, brg)
+    if extra is builtin_forces:
+        return _integrate_builtin(*args, eparams, limit)
+    return _integrate_hooked(*args, extra, eparams, limit)
+
+
+# Two compiled entry points share one loop. numba cannot cache a function whose
+# argument is a function (the hook's type names the compiled object, not its code),
+# so a single entry point was compiled afresh in every process (tens of seconds:
+# each test worker, CLI start and benchmark process paid it). The package's own
+# effects always arrive as one program of ``builtin_forces``; the loop calls that as
+# a global, which numba can cache, and only a user's own kernels take the hooked path.
+@njit(nogil=True, cache=True)
+def _integrate_builtin(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
+                       fg, unb, brg, eparams, limit):  # pragma: no cover
+    return _rk4(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb,
+                brg, builtin_forces, eparams, limit)
+
+
+@njit(nogil=True)
+def _integrate_hooked(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
+                      fg, unb, brg, extra, eparams, limit):  # pragma: no cover
+    return _rk4(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb,
+                brg, extra, eparams, limit)
+
+
+# inlined into each entry point, so that the hook is a compile-time constant in the
+# cached one (passing it as a value would embed its address and forbid the cache)
+@njit(nogil=True, inline="always")
+def _rk4(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb, brg,
+         extra, eparams, limit):  # pragma: no cover
     n = omega.shape[0] - 1
     ndof = q0.shape[0]
     nrec = n + 1 - record_from
