@@ -699,17 +699,23 @@ def test_the_clearance_changes_both_bearings_clearance_and_contact_stiffness(sca
     assert plain.kB == params.kB and plain.resolved("kB_B") == params.resolved("kB_B")
 
 
-@pytest.mark.parametrize("effects", [(), (R.effects.BreathingCrack(),)], ids=["plain", "crack"])
+@pytest.mark.parametrize("effects", ["plain", "crack", "user kernel"])
 def test_the_compiled_integrator_is_plain_rk4_of_the_documented_forces(effects):
     """The compiled kernel shares trigonometry between RK-4 stages and bearings and sums
     the linear forces column by column; none of that may change what it integrates:
     a plain RK-4 of ``M^-1 (F - (C + Omega G) v - K q)`` with the unbalance, gravity,
     the two bearings' forces and the effect's kernel, over a speed ramp (angular
-    acceleration on), must give the same states to rounding."""
+    acceleration on), must give the same states to rounding. Both entry points: the
+    cached one of the package's own forces and the hooked one of a user's kernel."""
     from sknarx.rotor.bearings import bearing_force
+    from sknarx.rotor.effects import builtin_forces
     from sknarx.rotor.integrator import integrate
+    from sknarx.testing import ThermalBow
 
+    effects = {"plain": (), "crack": (R.effects.BreathingCrack(),),
+               "user kernel": (R.effects.BreathingCrack(), ThermalBow(bow=1e-4))}[effects]
     sim = R.RotorBearingSimulator(effects=effects)
+    assert (sim._setup.kernel is builtin_forces) == (len(effects) < 2)
     s = sim._setup
     unb, brg = s.unb, s.brg
     fs, substeps, n = 1000.0, 3, 25
