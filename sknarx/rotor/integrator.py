@@ -8,7 +8,9 @@ further physics enters through ONE hook, ``extra_force(t, phi, omega, alpha, q, 
 params, out)``, a numba-compiled function that adds generalised forces to
 ``out``; effects (rub, crack, misalignment, looseness...) are composed into such a
 function outside this module (see :mod:`sknarx.rotor.effects`), so the
-integrator never changes when physics is added.
+integrator never changes when physics is added. The package's own effects always
+arrive as one program of :func:`~sknarx.rotor.effects.builtin_forces`; that path is
+cached on disk by numba, a user's own kernels are compiled per process.
 
 Within one output sample the speed varies linearly (exact for piecewise-linear
 speed profiles), and the shaft angle is integrated analytically.
