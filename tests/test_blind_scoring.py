@@ -50,6 +50,14 @@ def _logged_run(report, commits):
     return frozen, evals
 
 
+def _changed_verdicts(evals, before, after):
+    """``(family, seed, verdict after)`` of every logged trial whose verdict ``after``
+    differs from the one ``before``."""
+    return {(fam, r["seed"], json.dumps(blind.verdict(r, after)[0]))
+            for fam, recs in evals.items() for r in recs
+            if blind.verdict(r, before)[0] != blind.verdict(r, after)[0]}
+
+
 def _right_in_library(recs, settings):
     """How many detectable in-library trials (singles and pairs) ``settings`` decides
     right."""
@@ -315,12 +323,11 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
               for fam, recs in evals.items()}
     assert counts == {"ross": (25, 26), "second": (26, 27)}
     rival = replace(ran, pair_rival_shrink=package.pair_rival_shrink)
-    changed = {(fam, r["seed"], json.dumps(blind.verdict(r, rival)[0]))
-               for fam, recs in evals.items() for r in recs
-               if blind.verdict(r, ran)[0] != blind.verdict(r, rival)[0]}
-    assert changed == {("ross", 45008, '"crack"'), ("second", 45001, '"rub"')}
+    assert _changed_verdicts(evals, ran, rival) == {("ross", 45008, '"crack"'),
+                                                    ("second", 45001, '"rub"')}
     assert {fam: _right_in_library(recs, rival) for fam, recs in evals.items()} == {
         "ross": 26, "second": 27}
+
 
 def test_the_47000_run_so_far_reproduces_from_its_logs_and_the_rival_test_changes_one_verdict():
     """The 47000 run (fresh seeds, searched before the rival-pair test, still partial:
@@ -333,10 +340,7 @@ def test_the_47000_run_so_far_reproduces_from_its_logs_and_the_rival_test_change
     assert ran.pair_rival_shrink is None and package.pair_rival_shrink is not None
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 56, "second": 57}
     rival = replace(ran, pair_rival_shrink=package.pair_rival_shrink)
-    changed = {(fam, r["seed"], json.dumps(blind.verdict(r, rival)[0]))
-               for fam, recs in evals.items() for r in recs
-               if blind.verdict(r, ran)[0] != blind.verdict(r, rival)[0]}
-    assert changed == {("ross", 47038, '"crack"')}
+    assert _changed_verdicts(evals, ran, rival) == {("ross", 47038, '"crack"')}
     counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, rival))
               for fam, recs in evals.items()}
     assert counts == {"ross": (20, 21), "second": (25, 25)}

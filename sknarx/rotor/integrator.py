@@ -107,15 +107,15 @@ def integrate(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
     args = (q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb, brg)
     if extra is builtin_forces:
         return _integrate_builtin(*args, eparams, limit)
-    return _integrate_hooked(*args, extra, eparams, limit)
+    return _rk4(*args, extra, eparams, limit)
 
 
-# Two compiled entry points share one loop. numba cannot cache a function whose
-# argument is a function (the hook's type names the compiled object, not its code),
-# so a single entry point was compiled afresh in every process (tens of seconds:
-# each test worker, CLI start and benchmark process paid it). The package's own
-# effects always arrive as one program of ``builtin_forces``; the loop calls that as
-# a global, which numba can cache, and only a user's own kernels take the hooked path.
+# numba cannot cache a function whose argument is a function (the hook's type names
+# the compiled object, not its code), so the loop alone was compiled afresh in every
+# process (tens of seconds: each test worker, CLI start and benchmark process paid
+# it). The package's own effects always arrive as one program of ``builtin_forces``;
+# this entry point calls that as a global, which numba can cache, and only a user's
+# own kernels run the loop with the hook (``_rk4`` called directly).
 @njit(nogil=True, cache=True)
 def _integrate_builtin(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
                        fg, unb, brg, eparams, limit):  # pragma: no cover
@@ -123,15 +123,9 @@ def _integrate_builtin(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv,
                 brg, builtin_forces, eparams, limit)
 
 
-@njit(nogil=True)
-def _integrate_hooked(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K,
-                      fg, unb, brg, extra, eparams, limit):  # pragma: no cover
-    return _rk4(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb,
-                brg, extra, eparams, limit)
-
-
-# inlined into each entry point, so that the hook is a compile-time constant in the
-# cached one (passing it as a value would embed its address and forbid the cache)
+# inlined where jitted code calls it, so that the hook is a compile-time constant in
+# the cached entry point (passing it as a value would embed its address and forbid the
+# cache); called from Python (a user's kernels) it is compiled on its own as usual
 @njit(nogil=True, inline="always")
 def _rk4(q0, v0, omega, phi0, t0, dt, substeps, record_from, minv, C, G, K, fg, unb, brg,
          extra, eparams, limit):  # pragma: no cover
