@@ -329,21 +329,20 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
         "ross": 26, "second": 27}
 
 
-def test_the_47000_run_so_far_reproduces_from_its_logs_and_the_rival_test_changes_one_verdict():
-    """The 47000 run (fresh seeds, searched before the rival-pair test, still partial:
-    docs/gap_validation.md, *The 47000 run, so far*) scores the frozen ``pair_rival_shrink``:
-    its logged trials decided again give the committed partial report, and the test
-    turns one pair into its right single (ROSS crack 47038) and changes no other
-    verdict. Resuming the run replaces the report and these counts with it."""
-    ran, evals = _logged_run("results/bench_gap_blind_47000_20cdf53_partial.json", "20cdf53")
+def test_the_47000_run_reproduces_from_its_logs_and_the_rival_test_changes_one_verdict():
+    """The 47000 run (fresh seeds, searched before the rival-pair test: docs/gap_validation.md,
+    *The 47000 run*) scores the frozen ``pair_rival_shrink``: its logged trials decided
+    again give the committed report, and the test turns one pair into its right single
+    (ROSS crack 47038) and changes no other verdict on 134 trials."""
+    ran, evals = _logged_run("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")
     package = DiagnosisSettings()
     assert ran.pair_rival_shrink is None and package.pair_rival_shrink is not None
-    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 56, "second": 57}
+    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 66, "second": 68}
     rival = replace(ran, pair_rival_shrink=package.pair_rival_shrink)
     assert _changed_verdicts(evals, ran, rival) == {("ross", 47038, '"crack"')}
     counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, rival))
               for fam, recs in evals.items()}
-    assert counts == {"ross": (20, 21), "second": (25, 25)}
+    assert counts == {"ross": (25, 26), "second": (30, 30)}
 
 
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
