@@ -345,6 +345,23 @@ def test_the_47000_run_reproduces_from_its_logs_and_the_rival_test_changes_one_v
     assert counts == {"ross": (25, 26), "second": (30, 30)}
 
 
+def test_attribution_under_the_floor_decided_on_logged_runs_only_adds_right_verdicts():
+    """``attribute_below_floor`` (off in the package) decided on the logs of the 27000,
+    33000 and 47000 runs (docs/gap_validation.md, *Attribution under the floor*): each
+    change is a sweep under the floor named by its true effect -- an anisotropy the
+    update followed, two misalignments -- and no effect-free, out-of-library or right
+    verdict moves."""
+    on = {"attribute_below_floor": True}
+    got = set()
+    for report, commit in (("results/bench_gap_blind_27000_4a216b5.json", "4a216b5"),
+                           ("results/bench_gap_blind_33000_f2832e1.json", "f2832e1"),
+                           ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")):
+        ran, evals = _logged_run(report, commit)
+        got |= _changed_verdicts(evals, ran, replace(ran, **on))
+    assert got == {("ross", 27025, '"anisotropy"'), ("second", 33005, '"misalignment"'),
+                   ("second", 33050, '"misalignment"'), ("second", 47061, '"anisotropy"')}
+
+
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
     """``benchmarks/bench_gap_floor_speeds.py``: sweeps over the frozen floor are counted
     per family and grid, each order's largest mean z2 kept, a skipped plant left out, and

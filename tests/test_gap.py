@@ -530,6 +530,43 @@ def test_the_breadth_waiver_only_adds_verdicts_that_leave_the_floor(e0, left, lo
         assert entry["shrink"] >= 0.6 and left * e0 <= floor
 
 
+@given(e0=st.floats(0.01, 100.0), left=st.floats(0.0, 1.0), log_share=st.floats(-2.0, 1.0),
+       floor=st.floats(0.05, 1.0))
+def test_attribution_under_the_floor_names_only_what_passes_the_full_test(e0, left,
+                                                                         log_share, floor):
+    """``attribute_below_floor``: above the floor nothing changes; under it the verdict
+    is no-gap or a candidate that removed ``min_shrink`` and ``min_log_shrink`` -- the
+    breadth waiver, which every candidate under the floor would meet, does not apply --
+    and never ``unexplained``."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide
+
+    n = 100
+    entry = _entry(["anisotropy"], left * e0 * n, 1.0 - left, log_share)
+    s = DiagnosisSettings(no_gap_per_feature=floor, min_shrink=0.6, min_log_shrink=0.3)
+    plain = decide(e0, [entry], s, n)
+    got = decide(e0, [entry], replace(s, attribute_below_floor=True), n)
+    if e0 > floor:
+        assert got is plain
+    elif got != "no-gap":
+        assert got is entry and entry["shrink"] >= 0.6 and log_share >= 0.3
+    else:
+        assert plain == "no-gap" and not (entry["shrink"] >= 0.6 and log_share >= 0.3)
+
+
+def test_attribution_under_the_floor_is_off_by_default():
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import decide
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.6, min_log_shrink=0.3)
+    assert s.attribute_below_floor is False
+    hidden = _entry(["anisotropy"], 8.0, 0.8, 0.5)  # 0.4 per feature before, 0.08 after
+    assert decide(0.4, [hidden], s, 100) == "no-gap"
+    on = replace(s, attribute_below_floor=True)
+    assert decide(0.4, [hidden], on, 100)["effect"] == "anisotropy"
+    assert decide(0.4, [], on, 100) == "no-gap"  # no candidate searched: nothing to name
+
+
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.core import decide

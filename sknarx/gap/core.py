@@ -317,7 +317,14 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     one above it (the candidates must explain it, or it is unexplained).
     """
     if e0 <= settings.no_gap_per_feature and not orders_over:
-        return "no-gap"
+        if not settings.attribute_below_floor:
+            return "no-gap"
+        # under the floor the breadth waiver would pass anything: the full test, and a
+        # candidate that fails it leaves the sweep effect-free
+        choice = preferred(ranking, settings, n_features)
+        passes = (choice is not None and choice["shrink"] >= settings.min_shrink
+                  and choice["log_shrink"] >= settings.min_log_shrink)
+        return choice if passes else "no-gap"
     choice = preferred(ranking, settings, n_features)
     if choice is None:
         return None

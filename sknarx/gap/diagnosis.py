@@ -622,7 +622,9 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     result = GapDiagnosis(doc, front_end="time-series",
                           tables={"before": cmp0, "all": cmp_all}, base=base)
     # the verdict before any candidate: decide's own test, so the two cannot drift apart
-    if not exhaustive and decide(e0, [], settings, n_features, over) == "no-gap":
+    # (under the floor a candidate may still be named when attribute_below_floor is set)
+    if (not exhaustive and not settings.attribute_below_floor
+            and decide(e0, [], settings, n_features, over) == "no-gap"):
         doc["verdict"] = "no-gap"
         return result
 

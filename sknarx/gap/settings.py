@@ -34,6 +34,10 @@ class DiagnosisSettings:
     # told from an effect-free sweep, so the breadth check has nothing to guard
     # (sknarx.gap.core.decide; docs/gap.md, *Verdict*)
     breadth_waived_at_floor: bool = True
+    # a sweep under the floor (every order too) is still attributed to the candidate
+    # that passes min_shrink and min_log_shrink of what is left (the breadth check not
+    # waived); False: under the floor is no-gap before any candidate
+    attribute_below_floor: bool = False
     # each order's held-out features are also tested on their own: a sweep under
     # no_gap_per_feature still goes to the candidates when the mean z2 of its held-out
     # 1x, 2x or 3x features exceeds that order's floor (sknarx.gap.core.orders_over_floor).
