@@ -567,6 +567,21 @@ def test_attribution_under_the_floor_is_off_by_default():
     assert decide(0.4, [], on, 100) == "no-gap"  # no candidate searched: nothing to name
 
 
+def test_the_report_says_why_an_effect_is_named_under_the_floor():
+    from sknarx.gap.report import _under_floor_text
+
+    settings = {"no_gap_per_feature": 0.34, "min_shrink": 0.6, "min_log_shrink": 0.3}
+    under = {"settings": settings, "gap_before": {"per_feature": 0.19}}
+    assert _under_floor_text(under) == (
+        " Under the floor, it is named because it removes at least 60 % of what is left "
+        "and 30 % of its logarithm (attribute_below_floor).")
+    above = {"settings": settings, "gap_before": {"per_feature": 0.5}}
+    # a sweep sent on by one order over its own floor went to the candidates as usual
+    order = {"settings": settings, "gap_before": {"per_feature": 0.19, "by_order": {
+        "2x": {"over_floor": True, "n": 20, "mean_z2": 2.3, "floor_z2": 1.81}}}}
+    assert _under_floor_text(above) == _under_floor_text(order) == ""
+
+
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.core import decide

@@ -315,23 +315,26 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     ``orders_over`` (:func:`orders_over_floor`) names the orders whose held-out features
     exceed their own floor: a sweep under ``no_gap_per_feature`` with any is decided as
     one above it (the candidates must explain it, or it is unexplained).
+
+    A sweep under the floor is ``no-gap`` unless ``attribute_below_floor`` is set; then
+    a candidate that removes ``min_shrink`` and ``min_log_shrink`` of what is left is
+    named (the breadth waiver does not apply there), and the sweep is ``no-gap``
+    otherwise, never unexplained.
     """
-    if e0 <= settings.no_gap_per_feature and not orders_over:
-        if not settings.attribute_below_floor:
-            return "no-gap"
-        # under the floor the breadth waiver would pass anything: the full test, and a
-        # candidate that fails it leaves the sweep effect-free
-        choice = preferred(ranking, settings, n_features)
-        passes = (choice is not None and choice["shrink"] >= settings.min_shrink
-                  and choice["log_shrink"] >= settings.min_log_shrink)
-        return choice if passes else "no-gap"
+    under = e0 <= settings.no_gap_per_feature and not orders_over
+    if under and not settings.attribute_below_floor:
+        return "no-gap"
+    # what a sweep is when no candidate explains it
+    unexplained = "no-gap" if under else None
     choice = preferred(ranking, settings, n_features)
     if choice is None:
-        return None
+        return unexplained
     left = choice["heldout_gap_after"] / max(n_features, 1)
-    broad = (choice["log_shrink"] >= settings.min_log_shrink
-             or (settings.breadth_waived_at_floor and left <= settings.no_gap_per_feature))
-    return choice if choice["shrink"] >= settings.min_shrink and broad else None
+    # under the floor every candidate leaves no more than it: the waiver would pass any
+    waived = (settings.breadth_waived_at_floor and not under
+              and left <= settings.no_gap_per_feature)
+    broad = choice["log_shrink"] >= settings.min_log_shrink or waived
+    return choice if choice["shrink"] >= settings.min_shrink and broad else unexplained
 
 
 class FrontEnd:

@@ -251,6 +251,21 @@ def _orders_text(doc) -> str:
             "the no-gap floor.")
 
 
+def _under_floor_text(doc) -> str:
+    """Why an effect is named for a sweep whose gap was within the no-gap floor (every
+    order within its own), as a sentence: only ``attribute_below_floor`` names one
+    there. Empty for a sweep above the floor."""
+    settings = doc["settings"]
+    before = float(doc["gap_before"]["per_feature"])
+    if (before > float(settings["no_gap_per_feature"])
+            or any(v.get("over_floor") for v in _by_order(doc).values())):
+        return ""
+    return (" Under the floor, it is named because it removes at least "
+            f"{100 * float(settings['min_shrink']):.0f} % of what is left and "
+            f"{100 * float(settings['min_log_shrink']):.0f} % of its logarithm "
+            "(attribute_below_floor).")
+
+
 def _orders_table(doc) -> str:
     """Each tested order's held-out mean z2 against its own floor, as an HTML table (empty
     where the front end has no per-order test)."""
@@ -298,7 +313,7 @@ def _html(doc, figs, prov):
                     if band else "")
         headline = (f"{_label(verdict)} removes {100 * float(doc['shrink']):.0f} % of the "
                     f"held-out gap{band_txt}; the gap was {before:.3g} per feature against "
-                    f"the no-gap floor {floor:.3g}."
+                    f"the no-gap floor {floor:.3g}." + _under_floor_text(doc)
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
                     + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc))
