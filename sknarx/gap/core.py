@@ -324,17 +324,17 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     under = e0 <= settings.no_gap_per_feature and not orders_over
     if under and not settings.attribute_below_floor:
         return "no-gap"
-    # what a sweep is when no candidate explains it
-    unexplained = "no-gap" if under else None
+    # the verdict when no candidate explains the gap: under the floor there is none
+    none_named = "no-gap" if under else None
     choice = preferred(ranking, settings, n_features)
     if choice is None:
-        return unexplained
+        return none_named
     left = choice["heldout_gap_after"] / max(n_features, 1)
     # under the floor every candidate leaves no more than it: the waiver would pass any
     waived = (settings.breadth_waived_at_floor and not under
               and left <= settings.no_gap_per_feature)
     broad = choice["log_shrink"] >= settings.min_log_shrink or waived
-    return choice if choice["shrink"] >= settings.min_shrink and broad else unexplained
+    return choice if choice["shrink"] >= settings.min_shrink and broad else none_named
 
 
 class FrontEnd:
