@@ -58,6 +58,8 @@ from sknarx.gap.core import effect_names, shrinks_alone  # noqa: E402
 DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
             "breadth_waived_at_floor", "attribute_below_floor", "pair_trigger", "pair_gain",
             "pair_margin", "pair_rival_shrink")
+#: the decision settings that are switches (True or False)
+SWITCHES = ("breadth_waived_at_floor", "attribute_below_floor")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -71,10 +73,9 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
 
 def _value(name: str, text: str):
     """A decision setting's value: a float (``pair_margin`` and ``pair_rival_shrink``
-    also None), the switches ``breadth_waived_at_floor`` and ``attribute_below_floor``
-    True or False, ``order_floors_z2`` three comma-separated
-    floats (1x, 2x, 3x) or None."""
-    if name in ("breadth_waived_at_floor", "attribute_below_floor"):
+    also None), the :data:`SWITCHES` True or False, ``order_floors_z2`` three
+    comma-separated floats (1x, 2x, 3x) or None."""
+    if name in SWITCHES:
         if text not in ("True", "False"):
             raise ValueError(text)
         return text == "True"
@@ -215,8 +216,7 @@ def main(argv=None):
             changes[name] = _value(name, text)
         except ValueError:
             ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin "
-                     "or pair_rival_shrink, True or False for breadth_waived_at_floor and "
-                     "attribute_below_floor, "
+                     f"or pair_rival_shrink, True or False for {' and '.join(SWITCHES)}, "
                      "three comma-separated numbers or None for order_floors_z2)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
