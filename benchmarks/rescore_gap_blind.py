@@ -57,7 +57,7 @@ from sknarx.gap.core import effect_names, shrinks_alone  # noqa: E402
 #: settings change what the search finds, which a log cannot replay
 DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
             "breadth_waived_at_floor", "attribute_below_floor", "pair_trigger", "pair_gain",
-            "pair_margin", "pair_rival_shrink")
+            "pair_margin", "pair_rival_shrink", "linear_form_gain")
 #: the decision settings that are switches (True or False)
 SWITCHES = ("breadth_waived_at_floor", "attribute_below_floor")
 #: each rate's denominator in :func:`bench_gap_blind.score`
@@ -72,8 +72,8 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
 
 
 def _value(name: str, text: str):
-    """A decision setting's value: a float (``pair_margin`` and ``pair_rival_shrink``
-    also None), the :data:`SWITCHES` True or False, ``order_floors_z2`` three
+    """A decision setting's value: a float (``pair_margin``, ``pair_rival_shrink`` and
+    ``linear_form_gain`` also None), the :data:`SWITCHES` True or False, ``order_floors_z2`` three
     comma-separated floats (1x, 2x, 3x) or None."""
     if name in SWITCHES:
         if text not in ("True", "False"):
@@ -215,9 +215,10 @@ def main(argv=None):
         try:
             changes[name] = _value(name, text)
         except ValueError:
-            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin "
-                     f"or pair_rival_shrink, True or False for {' and '.join(SWITCHES)}, "
-                     "three comma-separated numbers or None for order_floors_z2)")
+            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin, "
+                     "pair_rival_shrink or linear_form_gain, True or False for "
+                     f"{' and '.join(SWITCHES)}, three comma-separated numbers or None "
+                     "for order_floors_z2)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")

@@ -362,6 +362,27 @@ def test_attribution_under_the_floor_decided_on_logged_runs_only_adds_right_verd
                    ("second", 33050, '"misalignment"'), ("second", 47061, '"anisotropy"')}
 
 
+def test_the_linear_form_gain_decided_on_logged_runs_only_drops_near_isotropic_partners():
+    """``linear_form_gain`` (off in the package) at ``pair_gain``'s 0.3, decided on the
+    logs of the 31000, 37000 and 47000 runs with the package's other thresholds
+    (docs/gap_validation.md, *The anisotropy against its isotropic form*): each change
+    is a pair whose anisotropy removed less than 0.3 of what the isotropic support left
+    beside a clearance or a rub -- five ROSS clearances named alone, right, and one
+    second-plant rub whose verdict turns to the next pair, wrong either way -- and no
+    effect-free, out-of-library, anisotropy or pair verdict moves."""
+    got = set()
+    for report, commit in (("results/bench_gap_blind_31000_55c392b.json", "55c392b"),
+                           ("results/bench_gap_blind_37000_b2742a2.json",
+                            "b2742a2,af10e94"),
+                           ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")):
+        ran, evals = _logged_run(report, commit)
+        package = replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink)
+        got |= _changed_verdicts(evals, package, replace(package, linear_form_gain=0.3))
+    assert got == {("ross", 31010, '"clearance"'), ("ross", 31052, '"clearance"'),
+                   ("ross", 37010, '"clearance"'), ("ross", 37055, '"clearance"'),
+                   ("ross", 47010, '"clearance"'), ("second", 47017, '["crack", "rub"]')}
+
+
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
     """``benchmarks/bench_gap_floor_speeds.py``: sweeps over the frozen floor are counted
     per family and grid, each order's largest mean z2 kept, a skipped plant left out, and

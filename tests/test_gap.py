@@ -582,6 +582,54 @@ def test_the_report_says_why_an_effect_is_named_under_the_floor():
     assert _under_floor_text(above) == _under_floor_text(order) == ""
 
 
+@given(lead_left=st.floats(0.05, 0.9), pair_share=st.floats(0.01, 1.0),
+       form_share=st.floats(0.5, 1.5), gain=st.one_of(st.none(), st.floats(0.0, 0.9)))
+def test_a_member_that_barely_beats_its_linear_form_is_left_out(lead_left, pair_share,
+                                                                form_share, gain):
+    """``linear_form_gain``: a candidate whose tested member removes less than ``gain``
+    of what its linear form leaves is not chosen -- the verdict falls to the others as if
+    it had not been fitted -- and every other candidate is decided as without the test
+    (off: ``gain`` None, nothing changes)."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import beats_linear_form, decide
+
+    n, e0 = 100, 5.0
+    E0 = e0 * n
+    lead = _entry(["clearance"], lead_left * E0, 1.0 - lead_left, 0.6)
+    E_pair = pair_share * lead["heldout_gap_after"]
+    pair = _entry(["clearance", "anisotropy"], E_pair, 1.0 - E_pair / E0, 0.7)
+    # the clearance with an isotropic support in the anisotropy's place
+    pair["linear_form_tests"] = [{"member": "anisotropy", "linear_form":
+                                  "support-flexibility", "heldout_gap_after":
+                                  min(form_share * E_pair, lead["heldout_gap_after"]),
+                                  "outcome": "effect"}]
+    s = DiagnosisSettings(no_gap_per_feature=0.34, min_shrink=0.6, min_log_shrink=0.3,
+                          pair_trigger=0.5, pair_gain=0.3, pair_rival_shrink=None)
+    plain = decide(e0, [lead, pair], s, n)
+    got = decide(e0, [lead, pair], replace(s, linear_form_gain=gain), n)
+    form_left = pair["linear_form_tests"][0]["heldout_gap_after"]
+    kept = gain is None or E_pair <= (1.0 - gain) * form_left
+    assert beats_linear_form(pair, gain) is kept
+    assert beats_linear_form(lead, gain)  # no member tested: nothing to judge
+    if kept:
+        assert got is plain
+    else:
+        assert got is not pair and got == decide(e0, [lead], s, n)
+
+
+def test_the_report_says_when_a_member_did_too_little_beyond_its_linear_form():
+    from sknarx.gap.report import _linear_form_text
+
+    entry = {"heldout_gap_after": 90.0, "linear_form_tests": [
+        {"member": "anisotropy", "linear_form": "support-flexibility",
+         "heldout_gap_after": 100.0, "outcome": "effect"}]}
+    text = _linear_form_text(entry)
+    assert text.endswith("it removes 10 % of what that form leaves (100): an effect")
+    assert _linear_form_text(entry, 0.3).endswith(
+        "under the 30 % an effect must remove: model error, left out of the verdict")
+    assert "left out" not in _linear_form_text(entry, 0.05)
+
+
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.core import decide
@@ -785,7 +833,8 @@ def test_the_best_single_and_the_best_pair_are_both_tested_whatever_the_threshol
     assert doc["verdict"] == ["anisotropy", "crack"]  # preferred under these thresholds
     pair = next(r for r in ranked if r["effect"] == ["anisotropy", "crack"])
     assert pair["linear_form_tests"][0]["outcome"] == "effect"
-    assert "an effect" in _linear_form_text(pair)
+    assert _linear_form_text(pair).endswith(
+        "it removes 80 % of what that form leaves (300): an effect")
     alone = next(r for r in ranked if r["effect"] == [])
     assert alone["replaces"]["effect"] == ["anisotropy"]
     assert not any(r["effect"] == "anisotropy" for r in ranked)

@@ -209,8 +209,10 @@ def preferred(ranking: list, settings, n_features: int):
     leaves more than ``pair_trigger`` excess per feature, the pair removes
     ``pair_gain`` of what the single leaves, (with ``pair_margin`` set) scores at
     least that much below it and (with ``pair_rival_shrink`` set) its members are not
-    rivals (:func:`rivals`). None without any single."""
+    rivals (:func:`rivals`). A candidate whose member does too little more than its
+    linear form (:func:`beats_linear_form`) is left out. None without any single."""
     # a candidate left with model error only competes as a single would
+    ranking = [r for r in ranking if beats_linear_form(r, settings.linear_form_gain)]
     singles = [r for r in ranking if len(effect_names(r)) <= 1]
     pairs = [r for r in ranking if len(effect_names(r)) == 2]
     if not singles:
@@ -225,6 +227,21 @@ def preferred(ranking: list, settings, n_features: int):
                 and not rivals(pb, singles, settings.pair_rival_shrink)):
             return pb
     return best
+
+
+def beats_linear_form(entry: dict, gain: float | None) -> bool:
+    """Whether each member of ``entry`` that was tested against its linear form
+    (``linear_form_tests``, see :func:`search`) removes at least ``gain`` of the held-out
+    excess that form leaves. The search keeps a member as an effect whenever it scores
+    better than its form; with the held-out excess dominated by model-form error on a
+    rotor the model does not describe exactly, a member's extra parameters always buy
+    some of it -- an anisotropy whose two directions differ by little takes the share of
+    an isotropic support's (a pedestal's mass and stiffness the nominal model lacks) and
+    beats that form by a few per cent. ``gain`` None, or no member tested: True."""
+    if gain is None:
+        return True
+    return all(entry["heldout_gap_after"] <= (1.0 - gain) * t["heldout_gap_after"]
+               for t in entry.get("linear_form_tests", ()))
 
 
 def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | None:

@@ -187,19 +187,29 @@ def _rival_text(doc) -> str:
             "named.")
 
 
-def _linear_form_text(entry) -> str:
+def _linear_form_text(entry, gain=None) -> str:
     """What the effect-or-model-error test (``sknarx.gap.core.search``, step 4) found for
-    a ranking entry: the candidate it replaced, or the linear forms it beat."""
+    a ranking entry: the candidate it replaced, or the linear forms it beat, with the
+    share of what each form leaves that the member removes; with ``gain`` (the settings'
+    ``linear_form_gain``), whether that was enough for the verdict to consider it."""
     parts = []
     if r := entry.get("replaces"):
         parts.append(f"replaces {_label(r['effect'])}: its {r['member']} did no more than "
                      f"this linear change (held-out excess {_excess(r['heldout_gap_after'])} "
                      f"with it)")
     for t in entry.get("linear_form_tests", []):
-        parts.append(f"{t['member']} tested against its linear form {t['linear_form']}: "
-                     f"an effect (the linear form leaves {_excess(t['heldout_gap_after'])})")
+        left = t["heldout_gap_after"]
+        removed = 1.0 - entry["heldout_gap_after"] / left if left > 0 else 0.0
+        text = (f"{t['member']} tested against its linear form {t['linear_form']}: it "
+                f"removes {100 * removed:.0f} % of what that form leaves "
+                f"({_excess(left)})")
+        if gain is not None and removed < gain:
+            text += (f", under the {100 * gain:.0f} % an effect must remove: model error, "
+                     "left out of the verdict")
+        else:
+            text += ": an effect"
+        parts.append(text)
     return "; ".join(parts)
-
 
 
 def effect_parameters(effect, params) -> str:
@@ -285,6 +295,7 @@ def _orders_table(doc) -> str:
 def _html(doc, figs, prov):
     verdict = doc["verdict"]
     floor = float(doc["settings"]["no_gap_per_feature"])
+    gain = doc["settings"].get("linear_form_gain")
     before = float(doc["gap_before"]["per_feature"])
     n_feat = doc.get("n_heldout_features")
     upd = doc.get("nominal_update") or {}
@@ -334,7 +345,7 @@ def _html(doc, figs, prov):
           "; ".join(t for t in (effect_parameters(r["effect"], r["params"]),
                                 _model_error_text(r.get("model_error"))) if t),
           "; ".join([*r["evidence"], *filter(None, [_discrete_text(r),
-                                                     _linear_form_text(r)])])]
+                                                     _linear_form_text(r, gain)])])]
          for r in doc["ranking"]),
         ["candidate", "held-out gap removed", "held-out excess after", "fitted parameters",
          "evidence"],

@@ -66,6 +66,15 @@ class DiagnosisSettings:
     # taken) and then scored on fresh seeds (docs/gap_validation.md, *The 47000 run*);
     # None: no such test
     pair_rival_shrink: float | None = 0.8
+    # a candidate whose member has a linear form (an anisotropy's is the isotropic
+    # support) is judged only if that member removes this share of what its linear form
+    # leaves (sknarx.gap.core.beats_linear_form): less is what a change of the linear
+    # rotor explains -- model error, by the rule that separates the two. Measured on
+    # logged blind runs and to be scored on fresh seeds at pair_gain's value (0.3, what
+    # a pair's second member must remove too) before it is the default
+    # (docs/gap_validation.md, *The anisotropy against its isotropic form*); None: the
+    # search's own test (the member scores better than its form) alone
+    linear_form_gain: float | None = None
     n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
     # Sobol settings of a candidate's parameters scored before its local runs: a rub's
