@@ -240,8 +240,16 @@ def beats_linear_form(entry: dict, gain: float | None) -> bool:
     beats that form by a few per cent. ``gain`` None, or no member tested: True."""
     if gain is None:
         return True
-    return all(entry["heldout_gap_after"] <= (1.0 - gain) * t["heldout_gap_after"]
+    return all(removed_beyond_form(entry, t) >= gain
                for t in entry.get("linear_form_tests", ()))
+
+
+def removed_beyond_form(entry: dict, test: dict) -> float:
+    """The share of the held-out excess a member's linear form leaves (``test``, one of
+    ``entry``'s ``linear_form_tests``) that ``entry`` removes; 0 where the form leaves
+    none."""
+    left = test["heldout_gap_after"]
+    return 1.0 - entry["heldout_gap_after"] / left if left > 0 else 0.0
 
 
 def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | None:

@@ -13,6 +13,7 @@ from ..io import json_safe
 from ..plotting import plt, save
 from ..rotor import EFFECTS
 from .calibration import NUISANCE_UNITS
+from .core import beats_linear_form, removed_beyond_form
 from .features import NONSYNC_LABELS
 
 FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", *NONSYNC_LABELS]
@@ -198,12 +199,11 @@ def _linear_form_text(entry, gain=None) -> str:
                      f"this linear change (held-out excess {_excess(r['heldout_gap_after'])} "
                      f"with it)")
     for t in entry.get("linear_form_tests", []):
-        left = t["heldout_gap_after"]
-        removed = 1.0 - entry["heldout_gap_after"] / left if left > 0 else 0.0
+        removed = removed_beyond_form(entry, t)
         text = (f"{t['member']} tested against its linear form {t['linear_form']}: it "
                 f"removes {100 * removed:.0f} % of what that form leaves "
-                f"({_excess(left)})")
-        if gain is not None and removed < gain:
+                f"({_excess(t['heldout_gap_after'])})")
+        if not beats_linear_form({**entry, "linear_form_tests": [t]}, gain):
             text += (f", under the {100 * gain:.0f} % an effect must remove: model error, "
                      "left out of the verdict")
         else:
