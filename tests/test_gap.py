@@ -623,11 +623,14 @@ def test_the_report_says_when_a_member_did_too_little_beyond_its_linear_form():
     entry = {"heldout_gap_after": 90.0, "linear_form_tests": [
         {"member": "anisotropy", "linear_form": "support-flexibility",
          "heldout_gap_after": 100.0, "outcome": "effect"}]}
-    text = _linear_form_text(entry)
-    assert text.endswith("it removes 10 % of what that form leaves (100): an effect")
-    assert _linear_form_text(entry, 0.3).endswith(
-        "under the 30 % an effect must remove: model error, left out of the verdict")
-    assert "left out" not in _linear_form_text(entry, 0.05)
+    assert _linear_form_text(entry) == (
+        "anisotropy tested against its linear form support-flexibility: an effect (the "
+        "linear form leaves 100, 10 % of which it removes)")
+    assert _linear_form_text(entry, 0.3) == (
+        "anisotropy tested against its linear form support-flexibility: model error (the "
+        "linear form leaves 100, 10 % of which it removes, under the 30 % an effect must "
+        "remove: left out of the verdict)")
+    assert _linear_form_text(entry, 0.05) == _linear_form_text(entry)
 
 
 def test_a_pair_replaces_the_single_only_when_the_single_leaves_a_gap_it_removes():
@@ -834,7 +837,7 @@ def test_the_best_single_and_the_best_pair_are_both_tested_whatever_the_threshol
     pair = next(r for r in ranked if r["effect"] == ["anisotropy", "crack"])
     assert pair["linear_form_tests"][0]["outcome"] == "effect"
     assert _linear_form_text(pair).endswith(
-        "it removes 80 % of what that form leaves (300): an effect")
+        "an effect (the linear form leaves 300, 80 % of which it removes)")
     alone = next(r for r in ranked if r["effect"] == [])
     assert alone["replaces"]["effect"] == ["anisotropy"]
     assert not any(r["effect"] == "anisotropy" for r in ranked)

@@ -133,6 +133,11 @@ def _model_error_text(error) -> str:
                      for name, values in (error or {}).items())
 
 
+def _finite(value) -> bool:
+    """Whether ``value`` is a finite number (not a diverged fit's 'inf')."""
+    return isinstance(value, (int, float)) and bool(np.isfinite(value))
+
+
 def _excess(value) -> str:
     """A held-out excess (dimensionless) as text; a diverged fit's is 'inf' (a string
     once the document is JSON-safe)."""
@@ -199,16 +204,16 @@ def _linear_form_text(entry, gain=None) -> str:
                      f"this linear change (held-out excess {_excess(r['heldout_gap_after'])} "
                      f"with it)")
     for t in entry.get("linear_form_tests", []):
-        removed = removed_beyond_form(entry, t)
-        text = (f"{t['member']} tested against its linear form {t['linear_form']}: it "
-                f"removes {100 * removed:.0f} % of what that form leaves "
-                f"({_excess(t['heldout_gap_after'])})")
-        if not beats_linear_form({**entry, "linear_form_tests": [t]}, gain):
-            text += (f", under the {100 * gain:.0f} % an effect must remove: model error, "
-                     "left out of the verdict")
-        else:
-            text += ": an effect"
-        parts.append(text)
+        text = (f"{t['member']} tested against its linear form {t['linear_form']}: "
+                f"an effect (the linear form leaves {_excess(t['heldout_gap_after'])}")
+        if _finite(entry.get("heldout_gap_after")) and _finite(t["heldout_gap_after"]):
+            # a diverged fit's excess is 'inf' in a JSON-safe document: no share then
+            text += f", {100 * removed_beyond_form(entry, t):.0f} % of which it removes"
+            if not beats_linear_form({**entry, "linear_form_tests": [t]}, gain):
+                text = (text.replace(": an effect (", ": model error (", 1)
+                        + f", under the {100 * gain:.0f} % an effect must remove: left out "
+                        "of the verdict")
+        parts.append(text + ")")
     return "; ".join(parts)
 
 
