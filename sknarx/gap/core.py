@@ -238,10 +238,13 @@ def beats_linear_form(entry: dict, gain: float | None) -> bool:
     some of it -- an anisotropy whose two directions differ by little takes the share of
     an isotropic support's (a pedestal's mass and stiffness the nominal model lacks) and
     beats that form by a few per cent. ``gain`` None, or no member tested: True."""
-    if gain is None:
-        return True
-    return all(removed_beyond_form(entry, t) >= gain
-               for t in entry.get("linear_form_tests", ()))
+    return all(passes_form_test(entry, t, gain) for t in entry.get("linear_form_tests", ()))
+
+
+def passes_form_test(entry: dict, test: dict, gain: float | None) -> bool:
+    """Whether ``entry`` removes at least ``gain`` of what one member's linear form
+    leaves (``test``, one of its ``linear_form_tests``); ``gain`` None: True."""
+    return gain is None or removed_beyond_form(entry, test) >= gain
 
 
 def removed_beyond_form(entry: dict, test: dict) -> float:

@@ -13,7 +13,7 @@ from ..io import json_safe
 from ..plotting import plt, save
 from ..rotor import EFFECTS
 from .calibration import NUISANCE_UNITS
-from .core import beats_linear_form, removed_beyond_form
+from .core import passes_form_test, removed_beyond_form
 from .features import NONSYNC_LABELS
 
 FEATURE_ORDER = ["1/3x", "1/2x", "1x", "2x", "3x", *NONSYNC_LABELS]
@@ -204,16 +204,17 @@ def _linear_form_text(entry, gain=None) -> str:
                      f"this linear change (held-out excess {_excess(r['heldout_gap_after'])} "
                      f"with it)")
     for t in entry.get("linear_form_tests", []):
-        text = (f"{t['member']} tested against its linear form {t['linear_form']}: "
-                f"an effect (the linear form leaves {_excess(t['heldout_gap_after'])}")
+        share, kept = "", True
+        # a diverged fit's excess is 'inf' in a JSON-safe document: no share then
         if _finite(entry.get("heldout_gap_after")) and _finite(t["heldout_gap_after"]):
-            # a diverged fit's excess is 'inf' in a JSON-safe document: no share then
-            text += f", {100 * removed_beyond_form(entry, t):.0f} % of which it removes"
-            if not beats_linear_form({**entry, "linear_form_tests": [t]}, gain):
-                text = (text.replace(": an effect (", ": model error (", 1)
-                        + f", under the {100 * gain:.0f} % an effect must remove: left out "
-                        "of the verdict")
-        parts.append(text + ")")
+            share = f", {100 * removed_beyond_form(entry, t):.0f} % of which it removes"
+            kept = passes_form_test(entry, t, gain)
+        outcome = "an effect" if kept else "model error"
+        left_out = "" if kept else (f", under the {100 * gain:.0f} % an effect must "
+                                    "remove: left out of the verdict")
+        parts.append(f"{t['member']} tested against its linear form {t['linear_form']}: "
+                     f"{outcome} (the linear form leaves {_excess(t['heldout_gap_after'])}"
+                     f"{share}{left_out})")
     return "; ".join(parts)
 
 
