@@ -27,6 +27,8 @@ Scores per family: top-1 on detectable in-library singles, pairs (both in the to
 of the ranking), false alarms on effect-free trials, ``unexplained`` on out-of-library
 trials, shrink against the oracle (the plant itself with every withheld effect, no
 noise), the confusion matrix, and on effect-free trials the nominal updates found.
+Beside them, of every verdict that names an effect, the share that names it right
+(``names_right``): top-1 counts a wrong name and ``unexplained`` alike, a user does not.
 An effect is *detectable* when it moves the measurement by more than the noise floor
 (held-out excess per feature of the measurement against the same plant without it).
 The package's per-order floors (``order_floors_z2``) are refitted on the null trials
@@ -458,6 +460,9 @@ def score(recs, s, rule=None):
     sep_pairs = [r for r in pairs if separable(r, s)]
     beyond_out = [r for r in out if not within_noise_of_library(r, s)]
     with_place = [r for r in singles if has_place(r, s) and right(r, s, rule)]
+    # every verdict that names an effect: right only on a detectable trial it names right
+    # (top-1 counts a wrong name and `unexplained` alike; a user does not)
+    named = [r for r in recs if verdict(r, s, rule)[0] not in ("no-gap", "unexplained")]
     return {
         "top1": rate(singles, lambda r: right(r, s, rule)),
         "top1_separable": rate(sep_singles, lambda r: right(r, s, rule)),
@@ -482,6 +487,8 @@ def score(recs, s, rule=None):
         "false_alarm": rate(free, lambda r: verdict(r, s, rule)[0] != "no-gap"),
         "unexplained_out_of_library": rate(out, lambda r: verdict(r, s, rule)[0] == "unexplained"),
         "shrink_vs_oracle_median": float(np.median(ratios)) if ratios else float("nan"),
+        "names_right": rate(named, lambda r: detectable(r, s) and right(r, s, rule)),
+        "n_named": len(named),
         "n_detectable_singles": len(singles), "n_detectable_pairs": len(pairs),
         "n_pairs_with_a_hidden_member": sum(1 for r in lib if isinstance(r["kind"], list)
                                             and isinstance(truth_label(r, s), str)),

@@ -66,7 +66,9 @@ COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "unexplained_out_of_library": "n_out_of_library",
           # secondary: the out-of-library trials no in-library fit matches within the
           # noise floor (bench_gap_blind.within_noise_of_library)
-          "unexplained_out_of_library_beyond_library": "n_out_of_library_beyond_library"}
+          "unexplained_out_of_library_beyond_library": "n_out_of_library_beyond_library",
+          # secondary: of every verdict that names an effect, the right ones
+          "names_right": "n_named"}
 COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 

@@ -383,6 +383,38 @@ def test_the_linear_form_gain_decided_on_logged_runs_only_drops_near_isotropic_p
                    ("ross", 47010, '"clearance"'), ("second", 47017, '["crack", "rub"]')}
 
 
+def test_the_breadth_bar_at_zero_decided_on_logged_runs_names_what_passed_the_shrink():
+    """``min_log_shrink`` 0 instead of 0.3, decided on the logs of the 33000, 43000 and
+    47000 runs with the package's other thresholds (docs/gap_validation.md, *The breadth
+    check on the independent plants*): every change is an ``unexplained`` whose best
+    candidate removed 0.6 of the gap -- six right (four ROSS cracks, a ROSS rub, a
+    second-plant pair) and two wrong names (ROSS 47023, 47031) that the named
+    verdicts' precision (``names_right``) counts and top-1 does not."""
+    got, right = set(), set()
+    for report, commit in (("results/bench_gap_blind_33000_f2832e1.json", "f2832e1"),
+                           ("results/bench_gap_blind_43000_904a00e.json",
+                            "904a00e,669b3a1,e136ade"),
+                           ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")):
+        ran, evals = _logged_run(report, commit)
+        package = replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink)
+        zero = replace(package, min_log_shrink=0.0)
+        changed = _changed_verdicts(evals, package, zero)
+        got |= changed
+        right |= {(fam, seed) for fam, seed, _ in changed
+                  for r in evals[fam] if r["seed"] == seed and blind.right(r, zero)}
+        if report.endswith("47000_20cdf53.json"):
+            before, after = (blind.score(evals["ross"], x) for x in (package, zero))
+            assert (before["n_named"], after["n_named"]) == (36, 39)
+            assert after["names_right"] < before["names_right"]
+    assert got == {("ross", 33022, '"crack"'), ("ross", 33050, '"crack"'),
+                   ("second", 33047, '["clearance", "misalignment"]'),
+                   ("ross", 43023, '"crack"'), ("ross", 43053, '"crack"'),
+                   ("ross", 47023, '"rub"'), ("ross", 47031, '"crack"'),
+                   ("ross", 47046, '"rub"')}
+    assert got - {(f, s, v) for f, s, v in got if (f, s) in right} == {
+        ("ross", 47023, '"rub"'), ("ross", 47031, '"crack"')}
+
+
 def test_the_floor_check_on_two_grids_counts_each_family_and_grid_apart():
     """``benchmarks/bench_gap_floor_speeds.py``: sweeps over the frozen floor are counted
     per family and grid, each order's largest mean z2 kept, a skipped plant left out, and
