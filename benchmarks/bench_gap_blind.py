@@ -181,13 +181,11 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
                        for k, r in kinds.iterrows()},
         "oracle_E": e_or, "oracle_shrink": 1 - e_or / E0 if E0 > 0 else 0.0,
         "effect_gap": e_eff / max(n_eff, 1),
-        # the held-out sum of z2 before any candidate, and each candidate's (with its
-        # parameters' standard deviations): for tests the excess cannot make under the
-        # floor, decided from the log
-        "Z0": float(d.tables["before"]["z2"].sum()),
         "ranking": [{"effect": r["effect"], "shrink": r["shrink"], "log_shrink": r["log_shrink"],
                      "E": r["heldout_gap_after"], "score": r["score"], "params": r["params"],
-                     "params_std": r.get("params_std"), "z2": r.get("heldout_z2"),
+                     # a fitted parameter tested against its uncertainty (a split
+                     # the excess cannot resolve under the floor) is decided from the log
+                     "params_std": r.get("params_std"),
                      **{k: r[k] for k in ("model_error", "replaces", "linear_form_tests",
                                           "discrete_settings") if r.get(k)},
                      **({"setting_decided": r["setting_decided"]}

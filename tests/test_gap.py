@@ -732,13 +732,12 @@ def test_the_rival_test_only_ever_turns_a_pair_into_the_best_single(singles, pai
 
 
 def _given_fit(names, E, n_params, model_error=None):
-    """A candidate fit with a held-out table of 100 features sharing ``E`` equally (each
-    z2 its excess over the expectation 2, as ``gapmap.compare`` writes them)."""
+    """A candidate fit with a held-out table of 100 features sharing ``E`` equally."""
     from sknarx.gap.core import CandidateFit
 
     cmp = pd.DataFrame({"speed": np.repeat(np.arange(10.0), 10), "window": "steady",
                         "channel": "xA", "feature": np.tile([f"f{i}" for i in range(10)], 10),
-                        "excess": E / 100.0, "z2": E / 100.0 + 2.0, "gap": 1e-6})
+                        "excess": E / 100.0, "gap": 1e-6})
     return CandidateFit(names=tuple(names), params=[{}] * len(names) if len(names) != 1
                         else {}, params_std={}, n_params=n_params, heldout_excess=E, cmp=cmp,
                         details={"model_error": model_error} if model_error else {})

@@ -198,9 +198,6 @@ def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
             "params": f.params, "params_std": f.params_std,
             "heldout_gap_before": E0, "heldout_gap_after": E, "shrink": shrink(E0, E),
             "log_shrink": log_shrink(cmp0, f.cmp), "score": E + 2.0 * f.n_params,
-            # the held-out sum of z2 whole (the excess drops what is within noise per
-            # feature): so a test under the floor can be decided from the record
-            "heldout_z2": float(f.cmp["z2"].sum()),
             **f.details, "_cmp": f.cmp, "_fit": f,
         })
     out.sort(key=lambda r: r["score"])
