@@ -58,6 +58,16 @@ def _changed_verdicts(evals, before, after):
             if blind.verdict(r, before)[0] != blind.verdict(r, after)[0]}
 
 
+def _logged_runs_with_package_rule(runs):
+    """Each ``(report, commits)`` of ``runs`` as ``(report, package, evals)``: the run's
+    logged trials and its frozen thresholds with the package's rival test (the rule the
+    what-ifs of docs/gap_validation.md are weighed against), checked by
+    :func:`_logged_run`."""
+    for report, commits in runs:
+        ran, evals = _logged_run(report, commits)
+        yield report, replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink), evals
+
+
 def _right_in_library(recs, settings):
     """How many detectable in-library trials (singles and pairs) ``settings`` decides
     right."""
@@ -371,12 +381,10 @@ def test_the_linear_form_gain_decided_on_logged_runs_only_drops_near_isotropic_p
     second-plant rub whose verdict turns to the next pair, wrong either way -- and no
     effect-free, out-of-library, anisotropy or pair verdict moves."""
     got = set()
-    for report, commit in (("results/bench_gap_blind_31000_55c392b.json", "55c392b"),
-                           ("results/bench_gap_blind_37000_b2742a2.json",
-                            "b2742a2,af10e94"),
-                           ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")):
-        ran, evals = _logged_run(report, commit)
-        package = replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink)
+    for _, package, evals in _logged_runs_with_package_rule((
+            ("results/bench_gap_blind_31000_55c392b.json", "55c392b"),
+            ("results/bench_gap_blind_37000_b2742a2.json", "b2742a2,af10e94"),
+            ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53"))):
         got |= _changed_verdicts(evals, package, replace(package, linear_form_gain=0.3))
     assert got == {("ross", 31010, '"clearance"'), ("ross", 31052, '"clearance"'),
                    ("ross", 37010, '"clearance"'), ("ross", 37055, '"clearance"'),
@@ -391,12 +399,10 @@ def test_the_breadth_bar_at_zero_decided_on_logged_runs_names_what_passed_the_sh
     second-plant pair) and two wrong names (ROSS 47023, 47031) that the named
     verdicts' precision (``names_right``) counts and top-1 does not."""
     got, right = set(), set()
-    for report, commit in (("results/bench_gap_blind_33000_f2832e1.json", "f2832e1"),
-                           ("results/bench_gap_blind_43000_904a00e.json",
-                            "904a00e,669b3a1,e136ade"),
-                           ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53")):
-        ran, evals = _logged_run(report, commit)
-        package = replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink)
+    for report, package, evals in _logged_runs_with_package_rule((
+            ("results/bench_gap_blind_33000_f2832e1.json", "f2832e1"),
+            ("results/bench_gap_blind_43000_904a00e.json", "904a00e,669b3a1,e136ade"),
+            ("results/bench_gap_blind_47000_20cdf53.json", "20cdf53"))):
         zero = replace(package, min_log_shrink=0.0)
         changed = _changed_verdicts(evals, package, zero)
         got |= changed
