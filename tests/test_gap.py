@@ -1075,10 +1075,11 @@ def test_each_probe_has_its_own_runout_with_a_2x_and_it_is_found_per_probe():
             assert abs(got - v) < tol, (ch, k, got, v, tol)
 
 
-def _fit_one_effect(effect, channels, n_speeds, seed, name, n_probe=16):
+def _fit_one_effect(effect, channels, n_speeds, seed, name, n_probe=16,
+                    probes_per_parameter=None):
     """Simulate a sweep with ``effect`` (SNR 35 dB) and calibrate the library's ``name``
-    on it, after the nuisance-only fit (``n_probe`` Sobol settings scored first);
-    returns the fitted effect parameters."""
+    on it, after the nuisance-only fit (``n_probe`` Sobol settings scored first, at most
+    ``probes_per_parameter`` each); returns the fitted effect parameters."""
     from sknarx.gap.calibration import calibrate
     from sknarx.rotor import EFFECTS, MeasurementNoise, RotorBearingSimulator
 
@@ -1088,7 +1089,8 @@ def _fit_one_effect(effect, channels, n_speeds, seed, name, n_probe=16):
     model, meas, train, _ = _calibration_setup(tab[["speed", "t", *channels]])
     cal0 = calibrate(model, meas, train, (), max_nfev=15)
     return calibrate(model, meas, train, [EFFECTS[name]], starts=[cal0.x],
-                     max_nfev=15, n_probe=n_probe).effect_params[0]
+                     max_nfev=15, n_probe=n_probe,
+                     probes_per_parameter=probes_per_parameter).effect_params[0]
 
 
 @pytest.mark.slow
@@ -1101,11 +1103,13 @@ def test_a_crack_is_found_at_its_station(station):
     from sknarx.gap import DiagnosisSettings
     from sknarx.rotor import BreathingCrack
 
-    # the diagnosis's probes (64): with where it opens searched too (four parameters),
-    # 16 settings left the O2-B basin unprobed and A-O1 came out cheapest in training
+    # the diagnosis's probes (64 for its four parameters): with where it opens searched
+    # too, 16 settings left the O2-B basin unprobed and A-O1 came out cheapest in training
+    settings = DiagnosisSettings()
     got = _fit_one_effect(BreathingCrack(depth=0.5, angle=0.6, station=station),
                           ("xO1", "yO1", "xA", "yA"), 10, 2, "crack",
-                          n_probe=DiagnosisSettings().n_probe)
+                          n_probe=settings.n_probe,
+                          probes_per_parameter=settings.probes_per_parameter)
     assert got["station"] == station
     assert got["depth"] == pytest.approx(0.5, rel=0.25)
     # (angle, opening) and (angle + pi, opening + pi) are one crack: the normal's sign

@@ -80,10 +80,14 @@ class DiagnosisSettings:
     # Sobol settings of a candidate's parameters scored before its local runs: a rub's
     # contact regime (clearance against orbit and stator offset, 5 parameters) is a
     # small corner of its range that 16 settings missed on an independent plant (shrink
-    # 0.52 against 0.955 with 64; each probe is one warm-started evaluation)
-    n_probe: int = 64
+    # 0.52 against 0.955 with 64; each probe is one warm-started evaluation), and 64
+    # left three rubs of the two independent plants in a basin with the stator pushed
+    # sideways, where 128 found the contact on the bearing line at the same cost
+    # (docs/gap_validation.md, *ROSS's rub friction*; the blind score is pending)
+    n_probe: int = 128
     # ... at most this many per probed parameter (rounded up to a power of two): a
-    # one-parameter clearance gets 16, a two-parameter looseness 32, the rest 64
+    # one-parameter clearance gets 16, a two-parameter looseness 32, a four-parameter
+    # crack 64, a five-parameter rub or misalignment 128
     probes_per_parameter: int | None = 16
     # a pair's partner is probed (and then fitted) on top of the lead's converged fit,
     # a better informed start than a single's: half the probes per parameter and half
