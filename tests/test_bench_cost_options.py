@@ -1,0 +1,30 @@
+"""The cost benchmark's peer (``benchmarks/bench_gap_cost.py --peer-settings``): the
+settings it is timed against are read from the command line, and a misspelt field or a
+value that is not a literal ends the run with a usage line, not a traceback."""
+
+import argparse
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import bench_gap_cost as cost  # noqa: E402
+
+
+def test_peer_settings_are_diagnosis_settings_fields_with_literal_values():
+    ap = argparse.ArgumentParser()
+    assert cost._settings_from("warm_lead_s=None", ap) == {"warm_lead_s": None}
+    assert cost._settings_from("n_probe=64, settled_sigma=0.2", ap) == {
+        "n_probe": 64, "settled_sigma": 0.2}
+    assert cost._settings_from("", ap) == {}
+
+
+@pytest.mark.parametrize("text, named", [("nprobe=64", "nprobe"), ("n_probe", "n_probe"),
+                                         ("n_probe=sixty", "sixty")])
+def test_a_wrong_peer_setting_is_a_usage_error_naming_it(text, named, capsys):
+    with pytest.raises(SystemExit) as exc:
+        cost._settings_from(text, argparse.ArgumentParser(prog="bench_gap_cost.py"))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert named in err and "--peer-settings" in err and "Traceback" not in err
