@@ -81,7 +81,7 @@ def main():
     compile_s = time.perf_counter() - t
     rows, results = [], []
     peer_kinds = [k for k in args.peer_kinds.split(",") if k]
-    cold = DiagnosisSettings(**peer_settings)
+    peer_config = DiagnosisSettings(**peer_settings)
 
     def timed(measured, settings):
         """Median-ready wall times of ``repeat`` runs, and the last run's phases (s): where
@@ -126,7 +126,7 @@ def main():
                    "phases_s": phases}
             peer = "-"
             if k in peer_kinds and fam in args.peer_families.split(","):
-                dp, ptimes, _ = timed(measured, cold)
+                dp, ptimes, _ = timed(measured, peer_config)
                 row.update(peer_seconds=float(np.median(ptimes)), peer_runs_s=ptimes,
                            peer_verdict=dp["verdict"], peer_shrink=dp["shrink"],
                            speedup=float(np.median(ptimes)) / dt)
@@ -156,13 +156,16 @@ def main():
 
 def _settings_from(text, ap):
     """``field=value`` pairs (values as Python literals) as DiagnosisSettings keywords;
-    a misspelt field or a value that is not a literal ends the run with usage."""
+    a misspelt field or a value that is not a literal ends the run with usage. Pairs are
+    split only at a comma before the next ``field=``, so a tuple value keeps its commas
+    (``order_floors_z2=(2.48, 1.81, 1.76)``)."""
     import ast
     import dataclasses
+    import re
 
     fields = {f.name for f in dataclasses.fields(DiagnosisSettings)}
     out = {}
-    for item in filter(None, text.split(",")):
+    for item in filter(None, re.split(r",(?=\s*\w+\s*=)", text)):
         key, sep, value = item.partition("=")
         key = key.strip()
         if not sep or key not in fields:

@@ -18,6 +18,9 @@ def test_peer_settings_are_diagnosis_settings_fields_with_literal_values():
     assert cost._settings_from("n_probe=64, settled_sigma=0.2", ap) == {
         "n_probe": 64, "settled_sigma": 0.2}
     assert cost._settings_from("", ap) == {}
+    # a tuple keeps its commas: pairs split only before the next field=
+    assert cost._settings_from("order_floors_z2=(2.5, 1.8, 1.7),n_probe=64", ap) == {
+        "order_floors_z2": (2.5, 1.8, 1.7), "n_probe": 64}
 
 
 @pytest.mark.parametrize("text, named", [("nprobe=64", "nprobe"), ("n_probe", "n_probe"),
