@@ -49,6 +49,42 @@ def machine():
     }
 
 
+#: the machine-speed reference: bench_simulator's peer (scipy's RK45 at rtol 1e-6 on a
+#: NumPy right-hand side of the paper rotor, 2 s at 250 rad/s sampled at 1 kHz), a
+#: workload whose code has not moved since it was first timed, so its time tracks the
+#: machine, not the package; its earliest timing on record is the baseline
+REFERENCE_RUN = {"omega": 250.0, "duration_s": 2.0, "fs": 1000.0, "rtol": 1e-6}
+REFERENCE_BASELINE = "bench_simulator_2463907.json"
+
+
+def reference_workload():
+    """Run the machine-speed reference once; returns ``(outputs, solver result)``."""
+    from sknarx.rotor import RotorBearingSimulator
+    from sknarx.rotor.reference import solve_reference
+
+    r = REFERENCE_RUN
+    return solve_reference(RotorBearingSimulator(), r["omega"], r["duration_s"], r["fs"],
+                           method="RK45", rtol=r["rtol"])
+
+
+def machine_reference(repeat=1, runs_s=None):
+    """This machine's speed against the baseline's: the reference's median wall time
+    now (timed ``repeat`` times, or the given ``runs_s``), the baseline's (from
+    ``results/REFERENCE_BASELINE``) and their ratio ``factor`` (above 1: slower than
+    then). Divide a time by ``factor`` to quote it at the baseline machine's speed."""
+    if runs_s is None:
+        _, runs_s, _ = timeit(reference_workload, repeat)
+    now = statistics.median(runs_s)
+    base = json.loads((RESULTS / REFERENCE_BASELINE).read_text())
+    then = base["one_speed"]["solve_ivp_rk45_median_s"]
+    return {"workload": "scipy RK45 (rtol 1e-6), NumPy right-hand side, paper rotor, "
+                        "2 s at 250 rad/s, 1 kHz (bench_simulator's peer)",
+            "seconds": now, "runs_s": list(runs_s), "baseline_s": then,
+            "baseline_from": f"results/{REFERENCE_BASELINE} (commit "
+                             f"{base['machine']['git_commit'][:7]})",
+            "factor": now / then}
+
+
 def table(rows, headers):
     widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(headers)]
     line = "  ".join(str(h).ljust(w) for h, w in zip(headers, widths, strict=True))

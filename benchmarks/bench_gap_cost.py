@@ -14,7 +14,11 @@ most 3 minutes on this 2-core machine. The peer, run side by side on the
 (``warm_lead_s=None``, the code before the warm start); ``n_probe=64`` times the
 search before its probes were doubled. The table quotes its time, verdict and the
 ratio. The numba kernels are compiled once per
-process; the first-call compile time is reported separately. Stop other jobs first: on a
+process; the first-call compile time is reported separately. The machine's speed is
+timed before and after the runs (``_common.machine_reference``: bench_simulator's
+``solve_ivp`` peer, whose code has not moved) and each time is also quoted at the speed
+of the machine of ``results/bench_simulator_2463907.json``, on which the target was
+first met (the factor is in the table's header and the JSON). Stop other jobs first: on a
 shared machine the figure is only as good as the idle cores. The sweeps are the blind
 benchmark's trials (``plants.families``) with 19 speed steps instead of 10, channels
 ``xO1 yO1 xA yA xB yB``.
@@ -30,7 +34,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import PLANT_FAILURES, table, write_json  # noqa: E402
+from _common import (  # noqa: E402
+    PLANT_FAILURES,
+    machine_reference,
+    reference_workload,
+    table,
+    timeit,
+    write_json,
+)
 from plants import families  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -79,6 +90,9 @@ def main():
         warnings.simplefilter("ignore")
         diagnose(warm[warm.speed.isin(SPEEDS_19[:4])], candidates=("crack",))
     compile_s = time.perf_counter() - t
+    # the machine's speed, timed before and after the runs (a shared machine drifts):
+    # each time is also quoted at the speed of the machine the target was first met on
+    _, ref_runs, _ = timeit(reference_workload, 1)
     rows, results = [], []
     peer_kinds = [k for k in args.peer_kinds.split(",") if k]
     peer_config = DiagnosisSettings(**peer_settings)
@@ -138,11 +152,19 @@ def main():
             print(rows[-1], flush=True)
             print("  phases: " + ", ".join(f"{k} {v:.0f} s" for k, v in phases.items()),
                   flush=True)
+    _, ref_after, _ = timeit(reference_workload, 1)
+    reference = machine_reference(runs_s=ref_runs + ref_after)
+    factor = reference["factor"]
+    for row, res in zip(rows, [r for r in results if "seconds" in r], strict=True):
+        res["seconds_at_baseline_speed"] = res["seconds"] / factor
+        row.insert(5, f"{res['seconds_at_baseline_speed']:.0f} s")
     table(rows, ["family", "withheld", "verdict", "19-speed diagnosis (median)", "range",
+                 f"at the baseline machine's speed (x{factor:.2f})",
                  f"peer: {args.peer_settings} (verdict), ratio", "target"])
     write_json("bench_gap_cost", {"speeds": len(SPEEDS_19), "channels": list(families.CHANNELS),
                                   "samples_per_step": 1000, "repeat": args.repeat,
                                   "compile_and_warmup_s": compile_s, "runs": results,
+                                  "machine_reference": reference,
                                   "peer": "the same diagnosis with "
                                           + ", ".join(f"{k}={v!r}"
                                                       for k, v in peer_settings.items()),

@@ -31,3 +31,20 @@ def test_a_wrong_peer_setting_is_a_usage_error_naming_it(text, named, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert named in err and "--peer-settings" in err and "Traceback" not in err
+
+
+def test_the_machine_factor_is_the_references_median_over_its_baseline():
+    """Times are quoted at the baseline machine's speed by dividing by this factor, so it
+    must be the median of the reference's runs over the baseline file's own figure (and
+    name where that came from)."""
+    import json
+
+    import _common
+
+    base = json.loads((_common.RESULTS / _common.REFERENCE_BASELINE).read_text())
+    then = base["one_speed"]["solve_ivp_rk45_median_s"]
+    ref = _common.machine_reference(runs_s=[then, 3 * then, 2 * then])
+    assert ref["seconds"] == pytest.approx(2 * then)
+    assert ref["factor"] == pytest.approx(2.0)
+    assert ref["baseline_s"] == then and ref["runs_s"] == [then, 3 * then, 2 * then]
+    assert base["machine"]["git_commit"][:7] in ref["baseline_from"]
