@@ -769,12 +769,13 @@ class _GivenFits:
         return self.forms.get(fit.names, [])
 
 
-def _search_given(fits, forms, e0=20.0):
+def _search_given(fits, forms, e0=20.0, linear_form_gain=None):
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.core import conclude, decide, search
 
     s = DiagnosisSettings(no_gap_per_feature=0.3, min_shrink=0.6, min_log_shrink=0.3,
-                          pair_trigger=0.5, pair_gain=0.3, n_bootstrap=10)
+                          pair_trigger=0.5, pair_gain=0.3, n_bootstrap=10,
+                          linear_form_gain=linear_form_gain)
     front = _GivenFits(fits, forms)
     E0 = 100 * e0
     cmp0 = _given_fit((), E0, 0).cmp
@@ -848,6 +849,29 @@ def test_the_best_single_and_the_best_pair_are_both_tested_whatever_the_threshol
     strict = DiagnosisSettings(no_gap_per_feature=0.3, min_shrink=0.6, min_log_shrink=0.3,
                                pair_trigger=0.5, pair_gain=0.9)
     assert decide(20.0, ranked, strict, 100)["effect"] == []
+
+
+def test_with_a_linear_form_gain_the_next_contender_is_tested_too():
+    """``linear_form_gain`` leaves out a pair whose member beat its form by too little;
+    the pair the verdict would then name must face the same test, not be named
+    untested (with the gain unset, the search is as before)."""
+    support = {"support-flexibility": {"k": 2e7, "mass": 15.0, "damping": 800.0}}
+    fits = {("rub",): _given_fit(["rub"], 400.0, 5),
+            ("anisotropy",): _given_fit(["anisotropy"], 1500.0, 4),
+            ("clearance",): _given_fit(["clearance"], 1800.0, 2),
+            ("rub", "anisotropy"): _given_fit(["rub", "anisotropy"], 100.0, 9),
+            ("rub", "clearance"): _given_fit(["rub", "clearance"], 150.0, 7)}
+    # the anisotropy beats its form (score 126 against 118) but removes 9 % of what it
+    # leaves; the clearance in the next pair is no more than a linear change either
+    forms = {("rub", "anisotropy"): [_given_fit(["rub"], 110.0, 8, support)],
+             ("rub", "clearance"): [_given_fit(["rub"], 151.0, 6, support)]}
+    front, _, doc = _search_given(fits, forms)
+    assert ("rub", "clearance") not in front.asked
+    assert doc["verdict"] == ["rub", "anisotropy"]
+    front, ranked, doc = _search_given(fits, forms, linear_form_gain=0.3)
+    assert ("rub", "clearance") in front.asked
+    assert doc["verdict"] == "rub" and doc["model_error"] == support
+    assert not any(r["effect"] == ["rub", "clearance"] for r in ranked)
 
 
 @pytest.mark.slow

@@ -437,7 +437,10 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
        replaced by its other members with the model error stated (none left: model
        error alone); the replacement's entry says what it replaced (``replaces``), a
        candidate that passed says so (``linear_form_tests``). Repeated until the best
-       single and the best pair have both been tested.
+       single and the best pair have both been tested. With ``linear_form_gain`` set, a
+       candidate that beats its form by less than that share is out of the verdict
+       (:func:`beats_linear_form`), so the contenders are the best single and pair among
+       the rest, and the next ones are tested in turn.
     """
     tick = tick or (lambda msg: None)
     singles = run_parallel(settings.n_jobs, [lambda c=c: front.fit((c,)) for c in candidates],
@@ -465,7 +468,8 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
                 singles = [new if f.names == new.names
                            and new.heldout_excess < f.heldout_excess else f for f in singles]
         tick("pairs")
-    return _without_linear_members(front, singles + pairs, E0, cmp0, tick)
+    return _without_linear_members(front, singles + pairs, E0, cmp0, tick,
+                                   settings.linear_form_gain)
 
 
 def _contenders(ranked: list) -> list:
@@ -479,13 +483,15 @@ def _contenders(ranked: list) -> list:
     return out
 
 
-def _without_linear_members(front, fits, E0, cmp0, tick):
+def _without_linear_members(front, fits, E0, cmp0, tick, gain=None):
     """Step 4 of :func:`search`: the ranking, with the members of its contenders that
-    only change the linear rotor replaced by that model error."""
+    only change the linear rotor replaced by that model error. The contenders are
+    those the verdict can still name: a candidate that beat its form by less than
+    ``gain`` (:func:`beats_linear_form`) is out of it, and the next best is tested."""
     ranked = rank(fits, E0, cmp0)
     tested = set()
     # model error alone (no member left) has nothing to test
-    while todo := [r for r in _contenders(ranked)
+    while todo := [r for r in _contenders([e for e in ranked if beats_linear_form(e, gain)])
                    if r["_fit"].names and r["_fit"].names not in tested]:
         entry = todo[0]
         fit = entry["_fit"]
