@@ -373,13 +373,13 @@ def test_attribution_under_the_floor_decided_on_logged_runs_only_adds_right_verd
 
 
 def test_the_linear_form_gain_decided_on_logged_runs_only_drops_near_isotropic_partners():
-    """``linear_form_gain`` (off in the package) at ``pair_gain``'s 0.3, decided on the
-    logs of the 31000, 37000 and 47000 runs with the package's other thresholds
-    (docs/gap_validation.md, *The anisotropy against its isotropic form*): each change
-    is a pair whose anisotropy removed less than 0.3 of what the isotropic support left
-    beside a clearance or a rub -- five ROSS clearances named alone, right, and one
-    second-plant rub whose verdict turns to the next pair, wrong either way -- and no
-    effect-free, out-of-library, anisotropy or pair verdict moves."""
+    """``linear_form_gain`` (the package's default since the 49000 run scored it) at
+    ``pair_gain``'s 0.3, decided on the logs of the 31000, 37000 and 47000 runs with the
+    package's other thresholds (docs/gap_validation.md, *The anisotropy against its
+    isotropic form*): each change is a pair whose anisotropy removed less than 0.3 of what
+    the isotropic support left beside a clearance or a rub -- five ROSS clearances named
+    alone, right, and one second-plant rub whose verdict turns to the next pair, wrong
+    either way -- and no effect-free, out-of-library, anisotropy or pair verdict moves."""
     got = set()
     for _, package, evals in _logged_runs_with_package_rule((
             ("results/bench_gap_blind_31000_55c392b.json", "55c392b"),

@@ -36,7 +36,9 @@ class DiagnosisSettings:
     breadth_waived_at_floor: bool = True
     # a sweep under the floor (every order too) is still attributed to the candidate
     # that passes min_shrink and min_log_shrink of what is left (the breadth check not
-    # waived); False: under the floor is no-gap before any candidate
+    # waived); False: under the floor is no-gap before any candidate. Off until its
+    # cost is measured: on, every effect-free sweep pays the candidate search
+    # (docs/gap_validation.md, *The 49000 run*: its blind score lost nothing)
     attribute_below_floor: bool = False
     # each order's held-out features are also tested on their own: a sweep under
     # no_gap_per_feature still goes to the candidates when the mean z2 of its held-out
@@ -70,11 +72,11 @@ class DiagnosisSettings:
     # support) is judged only if that member removes this share of what its linear form
     # leaves (sknarx.gap.core.beats_linear_form): less is what a change of the linear
     # rotor explains -- model error, by the rule that separates the two. Measured on
-    # logged blind runs and to be scored on fresh seeds at pair_gain's value (0.3, what
-    # a pair's second member must remove too) before it is the default
-    # (docs/gap_validation.md, *The anisotropy against its isotropic form*); None: the
-    # search's own test (the member scores better than its form) alone
-    linear_form_gain: float | None = None
+    # logged blind runs at pair_gain's value (0.3, what a pair's second member must
+    # remove too) and then scored on fresh seeds (docs/gap_validation.md, *The
+    # anisotropy against its isotropic form* and *The 49000 run*); None: the search's
+    # own test (the member scores better than its form) alone
+    linear_form_gain: float | None = 0.3
     n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
     # Sobol settings of a candidate's parameters scored before its local runs: a rub's
