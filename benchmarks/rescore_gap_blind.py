@@ -131,10 +131,13 @@ def frozen_thresholds(path, ap):
     known = {f.name for f in fields(DiagnosisSettings)}
     # a report written before the breadth waiver existed was decided without it, one
     # written before the per-order floors without them, and one written before the
-    # rival-pair test without it
+    # rival-pair test without it; likewise the linear-form gain and the attribution
+    # under the floor (each off until it was made the default)
     thresholds.setdefault("breadth_waived_at_floor", False)
     thresholds.setdefault("order_floors_z2", None)
     thresholds.setdefault("pair_rival_shrink", None)
+    thresholds.setdefault("linear_form_gain", None)
+    thresholds.setdefault("attribute_below_floor", False)
     if thresholds["order_floors_z2"] is not None:  # a JSON list
         thresholds["order_floors_z2"] = tuple(thresholds["order_floors_z2"])
     return DiagnosisSettings(**{k: v for k, v in thresholds.items() if k in known})

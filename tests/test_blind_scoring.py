@@ -313,7 +313,8 @@ def test_the_pair_thresholds_tried_after_the_39000_run_lose_verdicts_blind():
 def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_reproduce_it():
     """The 45000 run is the blind measure of the package as it stood before the
     rival-pair test (docs/gap_validation.md, *The 45000 run*): its report's decision
-    thresholds are the package's but for that test (not there then), its logged trials
+    thresholds are the package's but for that test and the linear-form gain (neither
+    there then; the gain the default since the 49000 run), its logged trials
     decided again give the committed scores, and the pair thresholds tried after the
     39000 run gain one right in-library verdict on each plant there (ROSS 25 against 26,
     the second plant 26 against 27) -- over the three blind runs still none (ROSS 74
@@ -325,7 +326,8 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
     ran, evals = _logged_run("results/bench_gap_blind_45000_233690b.json", "233690b,1ac0d21")
     package = DiagnosisSettings()
     assert ran.pair_rival_shrink is None and package.pair_rival_shrink is not None
-    for name in set(rescore.DECISION) - {"pair_rival_shrink"}:
+    assert ran.linear_form_gain is None and package.linear_form_gain is not None
+    for name in set(rescore.DECISION) - {"pair_rival_shrink", "linear_form_gain"}:
         assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
     tried = replace(ran, **TRIED_PAIR)
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}

@@ -604,11 +604,13 @@ def test_a_member_that_barely_beats_its_linear_form_is_left_out(lead_left, pair_
                                   min(form_share * E_pair, lead["heldout_gap_after"]),
                                   "outcome": "effect"}]
     s = DiagnosisSettings(no_gap_per_feature=0.34, min_shrink=0.6, min_log_shrink=0.3,
-                          pair_trigger=0.5, pair_gain=0.3, pair_rival_shrink=None)
+                          pair_trigger=0.5, pair_gain=0.3, pair_rival_shrink=None,
+                          linear_form_gain=None)
     plain = decide(e0, [lead, pair], s, n)
     got = decide(e0, [lead, pair], replace(s, linear_form_gain=gain), n)
     form_left = pair["linear_form_tests"][0]["heldout_gap_after"]
-    kept = gain is None or E_pair <= (1.0 - gain) * form_left
+    # the share of what the form leaves that the pair removes, against the gain
+    kept = gain is None or 1.0 - E_pair / form_left >= gain
     assert beats_linear_form(pair, gain) is kept
     assert beats_linear_form(lead, gain)  # no member tested: nothing to judge
     if kept:
