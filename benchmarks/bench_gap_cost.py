@@ -13,12 +13,12 @@ most 3 minutes on this 2-core machine. The peer, run side by side on the
 ``--peer-settings`` changed: by default every calibration evaluation settled from rest
 (``warm_lead_s=None``, the code before the warm start); ``n_probe=64`` times the
 search before its probes were doubled. The table quotes its time, verdict and the
-ratio. The numba kernels are compiled once per
-process; the first-call compile time is reported separately. The machine's speed is
-timed before and after the runs (``_common.machine_reference``: bench_simulator's
-``solve_ivp`` peer, whose code has not moved) and each time is also quoted at the speed
-of the machine of ``results/bench_simulator_2463907.json``, on which the target was
-first met (the factor is in the table's header and the JSON). Stop other jobs first: on a
+ratio. The numba kernels are compiled once per process; the first-call compile time is
+reported separately. The machine's speed is timed before and after the runs
+(``_common.machine_reference``: bench_simulator's ``solve_ivp`` peer, whose code has
+not changed in substance) and each time is also quoted at the speed of the machine of
+``results/bench_simulator_2463907.json``, on which the target was first met (the
+factor is in the table's header and the JSON). Stop other jobs first: on a
 shared machine the figure is only as good as the idle cores. The sweeps are the blind
 benchmark's trials (``plants.families``) with 19 speed steps instead of 10, channels
 ``xO1 yO1 xA yA xB yB``.
