@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -58,23 +59,31 @@ REFERENCE_RUN = {"omega": 250.0, "duration_s": 2.0, "fs": 1000.0, "rtol": 1e-6}
 REFERENCE_BASELINE = "bench_simulator_2463907.json"
 
 
+@functools.cache
+def _reference_simulator():
+    """The reference's rotor, its static equilibrium already solved: the baseline timed
+    the integration alone, on a simulator that had run before."""
+    from sknarx.rotor import RotorBearingSimulator
+
+    sim = RotorBearingSimulator()
+    sim.static_equilibrium()
+    return sim
+
+
 def reference_workload():
     """Run the machine-speed reference once; returns ``(outputs, solver result)``."""
-    from sknarx.rotor import RotorBearingSimulator
     from sknarx.rotor.reference import solve_reference
 
     r = REFERENCE_RUN
-    return solve_reference(RotorBearingSimulator(), r["omega"], r["duration_s"], r["fs"],
+    return solve_reference(_reference_simulator(), r["omega"], r["duration_s"], r["fs"],
                            method="RK45", rtol=r["rtol"])
 
 
-def machine_reference(repeat=1, runs_s=None):
-    """This machine's speed against the baseline's: the reference's median wall time
-    now (timed ``repeat`` times, or the given ``runs_s``), the baseline's (from
-    ``results/REFERENCE_BASELINE``) and their ratio ``factor`` (above 1: slower than
+def machine_reference(runs_s):
+    """This machine's speed against the baseline's, from ``runs_s`` (wall times of
+    :func:`reference_workload`): their median, the baseline's (from
+    ``results/REFERENCE_BASELINE``) and the ratio ``factor`` (above 1: slower than
     then). Divide a time by ``factor`` to quote it at the baseline machine's speed."""
-    if runs_s is None:
-        _, runs_s, _ = timeit(reference_workload, repeat)
     now = statistics.median(runs_s)
     base = json.loads((RESULTS / REFERENCE_BASELINE).read_text())
     then = base["one_speed"]["solve_ivp_rk45_median_s"]

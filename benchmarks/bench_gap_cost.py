@@ -153,7 +153,7 @@ def main():
             print("  phases: " + ", ".join(f"{k} {v:.0f} s" for k, v in phases.items()),
                   flush=True)
     _, ref_after, _ = timeit(reference_workload, 1)
-    reference = machine_reference(runs_s=ref_runs + ref_after)
+    reference = machine_reference(ref_runs + ref_after)
     factor = reference["factor"]
     for row, res in zip(rows, [r for r in results if "seconds" in r], strict=True):
         res["seconds_at_baseline_speed"] = res["seconds"] / factor

@@ -85,7 +85,7 @@ def main(repeat=3):
         lambda: sim.sweep(speeds, fs=FS, n_samples=81921, settle=2.0, n_jobs=n_jobs,
                           progress=False), repeat)
 
-    reference = machine_reference(runs_s=ivp_times)
+    reference = machine_reference(ivp_times)
     results = {
         "machine_reference": reference,
         "one_speed": {

@@ -43,7 +43,7 @@ def test_the_machine_factor_is_the_references_median_over_its_baseline():
 
     base = json.loads((_common.RESULTS / _common.REFERENCE_BASELINE).read_text())
     then = base["one_speed"]["solve_ivp_rk45_median_s"]
-    ref = _common.machine_reference(runs_s=[then, 3 * then, 2 * then])
+    ref = _common.machine_reference([then, 3 * then, 2 * then])
     assert ref["seconds"] == pytest.approx(2 * then)
     assert ref["factor"] == pytest.approx(2.0)
     assert ref["baseline_s"] == then and ref["runs_s"] == [then, 3 * then, 2 * then]
