@@ -36,9 +36,10 @@ class DiagnosisSettings:
     breadth_waived_at_floor: bool = True
     # a sweep under the floor (every order too) is still attributed to the candidate
     # that passes min_shrink and min_log_shrink of what is left (the breadth check not
-    # waived); False: under the floor is no-gap before any candidate. Off until its
-    # cost is measured: on, every effect-free sweep pays the candidate search
-    # (docs/gap_validation.md, *The 49000 run*: its blind score lost nothing)
+    # waived); False: under the floor is no-gap before any candidate. Off: on, every
+    # effect-free sweep pays the candidate search, about ten times the diagnosis it
+    # takes today, and its blind score has not yet gained a verdict for it
+    # (docs/gap_validation.md, *The 49000 run* and *Cost history*)
     attribute_below_floor: bool = False
     # each order's held-out features are also tested on their own: a sweep under
     # no_gap_per_feature still goes to the candidates when the mean z2 of its held-out
@@ -85,7 +86,8 @@ class DiagnosisSettings:
     # 0.52 against 0.955 with 64; each probe is one warm-started evaluation), and 64
     # left three rubs of the two independent plants in a basin with the stator pushed
     # sideways, where 128 found the contact on the bearing line at the same cost
-    # (docs/gap_validation.md, *ROSS's rub friction*; the blind score is pending)
+    # (docs/gap_validation.md, *ROSS's rub friction*; measured side by side with 64 it
+    # costs no more, *Cost history*; the blind score is pending)
     n_probe: int = 128
     # ... at most this many per probed parameter (rounded up to a power of two): a
     # one-parameter clearance gets 16, a two-parameter looseness 32, a four-parameter
