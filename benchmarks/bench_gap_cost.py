@@ -140,10 +140,11 @@ def main():
                    "phases_s": phases}
             peer = "-"
             if k in peer_kinds and fam in args.peer_families.split(","):
-                dp, ptimes, _ = timed(measured, peer_config)
+                dp, ptimes, pphases = timed(measured, peer_config)
+                # the peer's phases too: a ratio alone does not say where it differs
                 row.update(peer_seconds=float(np.median(ptimes)), peer_runs_s=ptimes,
                            peer_verdict=dp["verdict"], peer_shrink=dp["shrink"],
-                           speedup=float(np.median(ptimes)) / dt)
+                           peer_phases_s=pphases, speedup=float(np.median(ptimes)) / dt)
                 peer = (f"{row['peer_seconds']:.0f} s ({dp['verdict']}), "
                         f"x{row['speedup']:.2f}")
             results.append(row)
@@ -152,6 +153,10 @@ def main():
             print(rows[-1], flush=True)
             print("  phases: " + ", ".join(f"{k} {v:.0f} s" for k, v in phases.items()),
                   flush=True)
+            if "peer_phases_s" in row:
+                print("  peer's phases: " + ", ".join(f"{k} {v:.0f} s"
+                                                      for k, v in row["peer_phases_s"].items()),
+                      flush=True)
     _, ref_after, _ = timeit(reference_workload, 1)
     reference = machine_reference(ref_runs + ref_after)
     factor = reference["factor"]
