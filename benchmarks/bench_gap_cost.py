@@ -151,12 +151,10 @@ def main():
             rows.append([fam, f"{truth['kind']} ({seed})", str(d["verdict"]), f"{dt:.0f} s",
                          f"{min(times):.0f}-{max(times):.0f} s", peer, "<= 180 s"])
             print(rows[-1], flush=True)
-            print("  phases: " + ", ".join(f"{k} {v:.0f} s" for k, v in phases.items()),
-                  flush=True)
-            if "peer_phases_s" in row:
-                print("  peer's phases: " + ", ".join(f"{k} {v:.0f} s"
-                                                      for k, v in row["peer_phases_s"].items()),
-                      flush=True)
+            for label, ph in (("phases", phases), ("peer's phases", row.get("peer_phases_s"))):
+                if ph is not None:
+                    print(f"  {label}: " + ", ".join(f"{k} {v:.0f} s" for k, v in ph.items()),
+                          flush=True)
     _, ref_after, _ = timeit(reference_workload, 1)
     reference = machine_reference(ref_runs + ref_after)
     factor = reference["factor"]
