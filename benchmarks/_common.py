@@ -79,6 +79,13 @@ def reference_workload():
                            method="RK45", rtol=r["rtol"])
 
 
+def time_reference(repeat=1):
+    """:func:`timeit` of :func:`reference_workload`, its simulator built before the first
+    timed call (the cache alone would build it inside that call)."""
+    _reference_simulator()
+    return timeit(reference_workload, repeat)
+
+
 def machine_reference(runs_s):
     """This machine's speed against the baseline's, from ``runs_s`` (wall times of
     :func:`reference_workload`): their median, the baseline's (from

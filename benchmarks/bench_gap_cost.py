@@ -37,9 +37,8 @@ import numpy as np  # noqa: E402
 from _common import (  # noqa: E402
     PLANT_FAILURES,
     machine_reference,
-    reference_workload,
     table,
-    timeit,
+    time_reference,
     write_json,
 )
 from plants import families  # noqa: E402
@@ -92,7 +91,7 @@ def main():
     compile_s = time.perf_counter() - t
     # the machine's speed, timed before and after the runs (a shared machine drifts):
     # each time is also quoted at the speed of the machine the target was first met on
-    _, ref_runs, _ = timeit(reference_workload, 1)
+    _, ref_runs, _ = time_reference(1)
     rows, results = [], []
     peer_kinds = [k for k in args.peer_kinds.split(",") if k]
     peer_config = DiagnosisSettings(**peer_settings)
@@ -155,7 +154,7 @@ def main():
                 if ph is not None:
                     print(f"  {label}: " + ", ".join(f"{k} {v:.0f} s" for k, v in ph.items()),
                           flush=True)
-    _, ref_after, _ = timeit(reference_workload, 1)
+    _, ref_after, _ = time_reference(1)
     reference = machine_reference(ref_runs + ref_after)
     factor = reference["factor"]
     for row, res in zip(rows, [r for r in results if "seconds" in r], strict=True):

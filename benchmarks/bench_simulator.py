@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 from _common import (  # noqa: E402
     REFERENCE_RUN,
     machine_reference,
-    reference_workload,
     table,
+    time_reference,
     timeit,
     write_json,
 )
@@ -60,7 +60,7 @@ def main(repeat=3):
     t_ours, ours_times, run = timeit(
         lambda: sim.simulate(W, fs=FS, n_samples=n, settle=0.0), repeat)
     a_ours = amplitudes(run["xO1"].to_numpy(), run["phi"].to_numpy())
-    t_ivp, ivp_times, (y_ivp, sol) = timeit(reference_workload, max(1, repeat - 1))
+    t_ivp, ivp_times, (y_ivp, sol) = time_reference(max(1, repeat - 1))
     a_ivp = amplitudes(y_ivp[:, i], phi)
     err_ours = np.abs(a_ours / a_ref - 1)
     err_ivp = np.abs(a_ivp / a_ref - 1)

@@ -48,3 +48,15 @@ def test_the_machine_factor_is_the_references_median_over_its_baseline():
     assert ref["factor"] == pytest.approx(2.0)
     assert ref["baseline_s"] == then and ref["runs_s"] == [then, 3 * then, 2 * then]
     assert base["machine"]["git_commit"][:7] in ref["baseline_from"]
+
+
+def test_the_reference_is_timed_after_its_simulator_is_built(monkeypatch):
+    """The baseline timed the integration alone: the simulator and its static
+    equilibrium are built before the first timed call, not inside it."""
+    import _common
+
+    events = []
+    monkeypatch.setattr(_common, "_reference_simulator", lambda: events.append("built"))
+    monkeypatch.setattr(_common, "reference_workload", lambda: events.append("run"))
+    _, runs_s, _ = _common.time_reference(2)
+    assert events == ["built", "run", "run"] and len(runs_s) == 2
