@@ -120,6 +120,35 @@ def write_json(name, payload):
     return path
 
 
+def setting_overrides(items, fields, ap, flag, example,
+                      fields_are="a field of DiagnosisSettings"):
+    """``field=value`` pairs from the command line as keywords, for the benchmarks that
+    change a :class:`~sknarx.gap.DiagnosisSettings` from theirs (one parser, one syntax).
+
+    Each of ``items`` holds one pair or several separated by commas; a pair ends only at a
+    comma before the next ``field=``, so a tuple keeps its commas (``order_floors_z2=(2.5,
+    1.8, 1.7)``, or without parentheses ``order_floors_z2=2.5,1.8,1.7``). Values are Python
+    literals (``None``, ``True``, ``64``, ``0.3``). A field not in ``fields`` or a value that
+    is not a literal is ``ap``'s usage error naming ``flag``, what the fields are
+    (``fields_are``) and, as a model, ``example``."""
+    import ast
+    import re
+
+    out = {}
+    for item in (p for text in items for p in re.split(r",(?=\s*\w+\s*=)", text) if p):
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or key not in fields:
+            ap.error(f"{flag}: {item!r} is not field=value with field {fields_are} "
+                     f"(e.g. {example})")
+        try:
+            out[key] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            ap.error(f"{flag}: the value of {key} ({value.strip()!r}) is not a Python literal "
+                     "(a number, True, False, None or a tuple)")
+    return out
+
+
 def rerun_trials(ap, items, families, log, run):
     """Yield the records of ``FAMILY:SEED`` ``items`` in turn, each from the JSON-lines
     ``log`` if it is there, else ``run(family, seed)``'s, appended to it first: a re-run

@@ -27,6 +27,7 @@ benchmark's trials (``plants.families``) with 19 speed steps instead of 10, chan
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -37,6 +38,7 @@ import numpy as np  # noqa: E402
 from _common import (  # noqa: E402
     PLANT_FAILURES,
     machine_reference,
+    setting_overrides,
     table,
     time_reference,
     write_json,
@@ -72,7 +74,9 @@ def main():
                          "package's, as field=value pairs (Python literals), "
                          "comma-separated")
     args = ap.parse_args()
-    peer_settings = _settings_from(args.peer_settings, ap)
+    peer_settings = setting_overrides(
+        [args.peer_settings], [f.name for f in dataclasses.fields(DiagnosisSettings)], ap,
+        "--peer-settings", "n_probe=64")
     kinds = args.kinds.split(",")
     try:
         seeds = ([int(x) for x in args.seeds.split(",")] if args.seeds
@@ -176,31 +180,6 @@ def main():
                                   "max_s": float(max(max(r["runs_s"]) for r in results
                                                      if "runs_s" in r)),
                                   "target_s": 180})
-
-
-def _settings_from(text, ap):
-    """``field=value`` pairs (values as Python literals) as DiagnosisSettings keywords;
-    a misspelt field or a value that is not a literal ends the run with usage. Pairs are
-    split only at a comma before the next ``field=``, so a tuple value keeps its commas
-    (``order_floors_z2=(2.48, 1.81, 1.76)``)."""
-    import ast
-    import dataclasses
-    import re
-
-    fields = {f.name for f in dataclasses.fields(DiagnosisSettings)}
-    out = {}
-    for item in filter(None, re.split(r",(?=\s*\w+\s*=)", text)):
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or key not in fields:
-            ap.error(f"--peer-settings: {item!r} is not field=value with a field of "
-                     f"DiagnosisSettings (e.g. n_probe=64)")
-        try:
-            out[key] = ast.literal_eval(value.strip())
-        except (ValueError, SyntaxError):
-            ap.error(f"--peer-settings: the value of {key} ({value!r}) is not a Python "
-                     "literal")
-    return out
 
 
 if __name__ == "__main__":

@@ -6,10 +6,12 @@ Run: ``python benchmarks/rescore_gap_blind.py --report results/bench_gap_blind_2
 The verdict is decided from the ranking after the search (:func:`sknarx.gap.core.decide`),
 so a logged trial can be decided again under other thresholds without running it. The
 thresholds start from the report's frozen ones; ``--what-if NAME=VALUE`` (repeatable)
-changes the named ones. Scores of both are printed side by side, with every trial whose
-verdict changes. This is analysis of a finished run, not an evaluation: thresholds
-chosen by looking at the evaluation trials are fitted on them, so a threshold change it
-suggests must be frozen and run on fresh seeds before its scores are claimed.
+changes the named ones; values are Python literals, read by the parser
+``bench_gap_cost.py --peer-settings`` uses (``_common.setting_overrides``). Scores of both
+are printed side by side, with every trial whose verdict changes. This is analysis of a
+finished run, not an evaluation: thresholds chosen by looking at the evaluation trials are
+fitted on them, so a threshold change it suggests must be frozen and run on fresh seeds
+before its scores are claimed.
 
 With several ``--commit`` (comma-separated) the runs' trials are pooled: meaningful only
 where those commits' searches give the same answers bit for bit (a later commit that
@@ -39,7 +41,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, table  # noqa: E402
+from _common import RESULTS, setting_overrides, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     SEARCH_PAIR_TRIGGER,
     detectable,
@@ -60,6 +62,8 @@ DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shri
             "pair_margin", "pair_rival_shrink", "linear_form_gain")
 #: the decision settings that are switches (True or False)
 SWITCHES = ("breadth_waived_at_floor", "attribute_below_floor")
+#: the decision settings None switches off
+NULLABLE = ("order_floors_z2", "pair_margin", "pair_rival_shrink", "linear_form_gain")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -73,20 +77,28 @@ COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 
 
-def _value(name: str, text: str):
-    """A decision setting's value: a float (``pair_margin``, ``pair_rival_shrink`` and
-    ``linear_form_gain`` also None), the :data:`SWITCHES` True or False, ``order_floors_z2`` three
-    comma-separated floats (1x, 2x, 3x) or None."""
+def _checked(name: str, value):
+    """A what-if value of the type its decision setting takes, or ValueError: a number
+    (``pair_margin``, ``pair_rival_shrink`` and ``linear_form_gain`` also None), the
+    :data:`SWITCHES` True or False, ``order_floors_z2`` three numbers (1x, 2x, 3x) or None."""
     if name in SWITCHES:
-        if text not in ("True", "False"):
-            raise ValueError(text)
-        return text == "True"
-    if name == "order_floors_z2" and text != "None":
-        values = tuple(float(v) for v in text.split(","))
-        if len(values) != 3:
-            raise ValueError(text)
-        return values
-    return None if text == "None" else float(text)
+        if not isinstance(value, bool):
+            raise ValueError(value)
+        return value
+    if value is None and name in NULLABLE:
+        return None
+    if name == "order_floors_z2":
+        if not (isinstance(value, tuple) and len(value) == 3
+                and all(_is_number(v) for v in value)):
+            raise ValueError(value)
+        return tuple(float(v) for v in value)
+    if not _is_number(value):
+        raise ValueError(value)
+    return float(value)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -211,19 +223,15 @@ def main(argv=None):
                     "what the search knew when it chose it (pair_statistics)")
     args = ap.parse_args(argv)
     frozen = frozen_thresholds(args.report, ap)
-    changes = {}
-    for item in args.what_if:
-        name, sep, text = item.partition("=")
-        if not sep or name not in DECISION:
-            ap.error(f"--what-if takes NAME=VALUE with NAME a decision threshold "
-                     f"({', '.join(DECISION)}); got {item!r}")
+    changes = setting_overrides(args.what_if, DECISION, ap, "--what-if", "pair_trigger=0.33",
+                                fields_are=f"a decision threshold ({', '.join(DECISION)})")
+    for name, value in changes.items():
         try:
-            changes[name] = _value(name, text)
+            changes[name] = _checked(name, value)
         except ValueError:
-            ap.error(f"--what-if {name}: {text!r} is not a number (None for pair_margin, "
-                     "pair_rival_shrink or linear_form_gain, True or False for "
-                     f"{' and '.join(SWITCHES)}, three comma-separated numbers or None "
-                     "for order_floors_z2)")
+            ap.error(f"--what-if {name}: {value!r} is not a number (None for "
+                     f"{', '.join(NULLABLE)}, True or False for {' and '.join(SWITCHES)}, "
+                     "three comma-separated numbers for order_floors_z2)")
     if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
         ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")

@@ -12,25 +12,47 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_gap_cost as cost  # noqa: E402
 
 
+def _peer(text, ap):
+    import dataclasses
+
+    import _common
+
+    from sknarx.gap import DiagnosisSettings
+
+    return _common.setting_overrides(
+        [text], [f.name for f in dataclasses.fields(DiagnosisSettings)], ap,
+        "--peer-settings", "n_probe=64")
+
+
 def test_peer_settings_are_diagnosis_settings_fields_with_literal_values():
     ap = argparse.ArgumentParser()
-    assert cost._settings_from("warm_lead_s=None", ap) == {"warm_lead_s": None}
-    assert cost._settings_from("n_probe=64, settled_sigma=0.2", ap) == {
+    assert _peer("warm_lead_s=None", ap) == {"warm_lead_s": None}
+    assert _peer("n_probe=64, settled_sigma=0.2", ap) == {
         "n_probe": 64, "settled_sigma": 0.2}
-    assert cost._settings_from("", ap) == {}
+    assert _peer("", ap) == {}
     # a tuple keeps its commas: pairs split only before the next field=
-    assert cost._settings_from("order_floors_z2=(2.5, 1.8, 1.7),n_probe=64", ap) == {
+    assert _peer("order_floors_z2=(2.5, 1.8, 1.7),n_probe=64", ap) == {
         "order_floors_z2": (2.5, 1.8, 1.7), "n_probe": 64}
+    assert _peer("order_floors_z2=2.5,1.8,1.7", ap) == {"order_floors_z2": (2.5, 1.8, 1.7)}
 
 
 @pytest.mark.parametrize("text, named", [("nprobe=64", "nprobe"), ("n_probe", "n_probe"),
                                          ("n_probe=sixty", "sixty")])
 def test_a_wrong_peer_setting_is_a_usage_error_naming_it(text, named, capsys):
     with pytest.raises(SystemExit) as exc:
-        cost._settings_from(text, argparse.ArgumentParser(prog="bench_gap_cost.py"))
+        _peer(text, argparse.ArgumentParser(prog="bench_gap_cost.py"))
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert named in err and "--peer-settings" in err and "Traceback" not in err
+
+
+def test_the_cost_benchmark_reads_its_peer_with_the_shared_parser():
+    """One parser for both benchmarks that change settings (the cost A/B's peer and the
+    rescoring's what-ifs): neither keeps its own."""
+    import rescore_gap_blind
+
+    assert cost.setting_overrides is rescore_gap_blind.setting_overrides
+    assert not hasattr(cost, "_settings_from") and not hasattr(rescore_gap_blind, "_value")
 
 
 def test_the_machine_factor_is_the_references_median_over_its_baseline():

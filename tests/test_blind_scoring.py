@@ -2,6 +2,7 @@
 what counts as right, where it is placed, which misses the update made. Records are
 written by hand in the logged format; nothing is simulated."""
 
+import argparse
 import json
 import sys
 from dataclasses import replace
@@ -242,6 +243,35 @@ def test_the_breadth_waiver_decided_again_on_a_logged_run(capsys):
         rescore.main(["--report", report, "--commit", "9d7bd56",
                       "--what-if", "breadth_waived_at_floor=yes"])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("what_if, value", [
+    ("order_floors_z2=2.48,1.81,1.76", (2.48, 1.81, 1.76)),
+    ("order_floors_z2=(2.48, 1.81, 1.76)", (2.48, 1.81, 1.76)),
+    ("order_floors_z2=None", None), ("pair_margin=None", None), ("min_shrink=1", 1.0),
+    ("attribute_below_floor=True", True)])
+def test_a_what_if_takes_its_settings_type(what_if, value):
+    """``--what-if`` values are literals of the type their setting takes (the recorded
+    commands' bare comma list for the per-order floors included)."""
+    import rescore_gap_blind as rescore
+
+    name = what_if.partition("=")[0]
+    parsed = rescore.setting_overrides([what_if], rescore.DECISION, argparse.ArgumentParser(),
+                                       "--what-if", "pair_trigger=0.33")
+    assert rescore._checked(name, parsed[name]) == value
+
+
+@pytest.mark.parametrize("what_if", ["min_shrink=None", "attribute_below_floor=1",
+                                     "order_floors_z2=2.48,1.81", "pair_gain=high"])
+def test_a_what_if_of_the_wrong_type_is_a_usage_error(what_if, capsys):
+    import rescore_gap_blind as rescore
+
+    with pytest.raises(SystemExit) as exc:
+        rescore.main(["--report", "results/bench_gap_blind_25000_f7de2a1.json",
+                      "--commit", "f7de2a1", "--what-if", what_if])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--what-if" in err and "Traceback" not in err
 
 
 def test_the_rates_interval_is_wilsons():
