@@ -495,3 +495,50 @@ def test_pair_statistics_name_a_rival_pair_and_its_weaker_members_share():
     assert row["pair_share"] == pytest.approx(0.5 / 3.0)
     assert blind.verdict(rec, replace(off, pair_rival_shrink=0.8))[0] == "rub"
     assert rescore.pair_statistics([rec], replace(off, pair_rival_shrink=0.8)) == []
+
+
+def _scores(top1, singles, followed, ool, n_ool, beyond=None, n_beyond=None):
+    sc = {"top1": top1, "n_detectable_singles": singles, "n_trials": singles + n_ool,
+          "pairs_in_top2": 1.0, "n_detectable_pairs": 2, "false_alarm": 0.0,
+          "n_effect_free": 3, "unexplained_out_of_library": ool, "n_out_of_library": n_ool}
+    if followed is not None:
+        sep = singles - followed
+        sc |= {"n_singles_followed_by_update": followed,
+               "top1_separable": round(top1 * singles) / sep}
+    if n_beyond is not None:
+        sc |= {"unexplained_out_of_library_beyond_library": beyond,
+               "n_out_of_library_beyond_library": n_beyond}
+    return sc
+
+
+def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it(tmp_path):
+    """``pool_gap_blind``: two reports' counts are summed family by family; the
+    beyond-library split is pooled over the one report that has it; top-1's reach is the
+    separable singles over all detectable ones; a separable miss is counted by what the
+    verdict named, a followed one and an out-of-library one are not."""
+    import pool_gap_blind as pool
+
+    misses = [{"truth": "rub", "verdict": ["crack", "rub"], "separable": True},
+              {"truth": "anisotropy", "verdict": "no-gap", "separable": False},
+              {"truth": "thermal-bow", "verdict": "runout", "separable": True}]
+    old = {"families": {"ross": {"scores": _scores(0.75, 8, 2, 0.5, 4),
+                                 "misclassified": misses[:1]}}}
+    new = {"families": {"ross": {"scores": _scores(0.8, 10, 1, 0.6, 5, 1.0, 3),
+                                 "misclassified": misses}}}
+    (tmp_path / "bench_gap_blind_1000_abc1234.json").write_text(json.dumps(old))
+    (tmp_path / "bench_gap_blind_3000_def5678.json").write_text(json.dumps(new))
+    (tmp_path / "bench_gap_blind.json").write_text("{}")  # the latest run's copy: not pooled
+    runs = pool.reports(0, tmp_path)
+    assert [(s, c) for s, c, _ in runs] == [(1000, "abc1234"), (3000, "def5678")]
+    assert [s for s, _, _ in pool.reports(2000, tmp_path)] == [3000]
+    got = pool.pool(runs, ["ross"])["ross"]
+    p = got["pooled"]
+    assert (p["top1"]["k"], p["top1"]["n"], p["top1"]["runs"]) == (6 + 8, 18, 2)
+    assert (p["top1_separable"]["k"], p["top1_separable"]["n"]) == (14, 6 + 9)
+    assert (p["unexplained_out_of_library"]["k"], p["unexplained_out_of_library"]["n"]) == (5, 9)
+    beyond = p["unexplained_out_of_library_beyond_library"]
+    assert (beyond["k"], beyond["n"], beyond["runs"]) == (3, 3, 1)
+    assert (p["out_of_library_within_noise"]["k"], p["out_of_library_within_noise"]["n"]) == (2, 5)
+    assert (got["top1_reach"]["k"], got["top1_reach"]["n"]) == (15, 18)
+    assert got["separable_misses"] == [{"truth": "rub", "verdict": "crack + rub", "n": 2}]
+    assert p["top1"]["interval"] == list(__import__("rescore_gap_blind").wilson(14, 18))

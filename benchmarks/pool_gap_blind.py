@@ -1,0 +1,171 @@
+"""The complete blind runs pooled, and how much of each target the data leave in reach.
+
+Run: ``python benchmarks/pool_gap_blind.py`` (``--since 31000``, ``--families
+ross,second``; paths relative to ``benchmarks/``). Writes
+``results/gap_blind_pooled.json``.
+
+Each run's report (``results/bench_gap_blind_<seeds>_<commit>.json``, as committed: each
+run decided by the package's rule of its day, with its own noise floors) gives its
+successes and trials; they are summed family by family, with the Wilson 95 % interval of
+each pooled rate. Beside the targets' rates it pools the two splits every report makes
+(``bench_gap_blind.score``):
+
+* detectable singles the nominal update followed (``separable`` false: after the update
+  the sweep is within the effect-free noise floor, so every rule that keeps the
+  effect-free sweeps ``no-gap`` says ``no-gap`` here too) and the rest; top-1 on the rest;
+  and ``top1_reach``, the top-1 that a diagnosis right on every separable single would
+  score;
+* visible out-of-library trials that an in-library fit (or the update alone) matches
+  within the noise floor (``within_noise_of_library``), and the rest; ``unexplained`` on
+  the rest. On the first kind a rule that judges candidates by their fit can answer
+  ``unexplained`` only by refusing a fit it accepts on in-library trials.
+
+Neither split is a score: the targets are scored on every visible trial. They say where
+the misses come from, which the caller needs before choosing what to change. The separable
+misses are also counted by what the verdict named (truth, verdict), pooled.
+
+This is analysis of finished runs: nothing is decided again (``rescore_gap_blind.py``
+does that for one run's logs), and reports written before a split existed (the
+beyond-library one from the 37000 run on) are left out of that split's pool, which the
+output says.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import re
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, table, write_json  # noqa: E402
+from rescore_gap_blind import wilson  # noqa: E402
+
+#: pooled rate -> (the report's rate, its denominator); a rate whose denominator a
+#: report does not carry is left out of that report's pool
+RATES = {
+    "top1": ("top1", "n_detectable_singles"),
+    "top1_separable": ("top1_separable", "n_separable_singles"),
+    "pairs_in_top2": ("pairs_in_top2", "n_detectable_pairs"),
+    "false_alarm": ("false_alarm", "n_effect_free"),
+    "unexplained_out_of_library": ("unexplained_out_of_library", "n_out_of_library"),
+    "unexplained_out_of_library_beyond_library": (
+        "unexplained_out_of_library_beyond_library", "n_out_of_library_beyond_library"),
+}
+REPORT = re.compile(r"bench_gap_blind_(\d+)_([0-9a-f]+)\.json$")
+#: verdict names of the out-of-library draws and of no effect: not separable-single misses
+NOT_IN_LIBRARY = ("no-gap", "line-50hz", "thermal-bow", "gear-mesh", "cage-fault")
+
+
+def reports(since, results=RESULTS):
+    """``(first seed, commit, report)`` of every committed run from seed ``since`` on,
+    in seed order."""
+    out = []
+    for path in results.glob("bench_gap_blind_*_*.json"):
+        m = REPORT.search(path.name)
+        if m and int(m.group(1)) >= since:
+            out.append((int(m.group(1)), m.group(2), json.loads(path.read_text())))
+    return sorted(out, key=lambda r: r[0])
+
+
+def counts(scores):
+    """A report's scores as ``{rate: (successes, trials)}``; a rate the report lacks
+    (or whose denominator it lacks) is not there."""
+    sc = dict(scores)
+    if "n_singles_followed_by_update" in sc:
+        sc["n_separable_singles"] = sc["n_detectable_singles"] - sc["n_singles_followed_by_update"]
+    out = {}
+    for name, (rate, n_key) in RATES.items():
+        if n_key not in sc or rate not in sc:
+            continue
+        n = int(sc[n_key])
+        k = int(round(sc[rate] * n)) if n else 0
+        out[name] = (k, n)
+    if "n_out_of_library_beyond_library" in sc:
+        out["out_of_library_within_noise"] = (
+            int(sc["n_out_of_library"]) - int(sc["n_out_of_library_beyond_library"]),
+            int(sc["n_out_of_library"]))
+    return out
+
+
+def separable_misses(family_report):
+    """``(truth, verdict)`` of each separable in-library single the run missed."""
+    out = []
+    for m in family_report.get("misclassified", []):
+        truth, got = m["truth"], m["verdict"]
+        if isinstance(truth, str) and truth not in NOT_IN_LIBRARY and m.get("separable"):
+            out.append((truth, got if isinstance(got, str) else " + ".join(got)))
+    return out
+
+
+def pool(runs, families):
+    """Per family: each run's counts, the pooled counts with their intervals, the
+    reach of top-1, and the separable misses by (truth, verdict)."""
+    out = {}
+    for fam in families:
+        per_run, total = [], collections.defaultdict(lambda: [0, 0, 0])
+        misses = collections.Counter()
+        for seed, commit, rep in runs:
+            d = rep["families"].get(fam)
+            if d is None:
+                continue
+            c = counts(d["scores"])
+            per_run.append({"seeds": seed, "commit": commit, "trials": d["scores"]["n_trials"],
+                            **{k: list(v) for k, v in c.items()}})
+            for k, (a, b) in c.items():
+                total[k][0] += a
+                total[k][1] += b
+                total[k][2] += 1
+            misses.update(separable_misses(d))
+        pooled = {k: {"k": a, "n": b, "rate": a / b if b else float("nan"),
+                      "interval": list(wilson(a, b)), "runs": r}
+                  for k, (a, b, r) in total.items()}
+        reach = None
+        if "top1_separable" in total:
+            n_sep, n_all = total["top1_separable"][1], total["top1"][1]
+            reach = {"k": n_sep, "n": n_all, "rate": n_sep / n_all if n_all else float("nan"),
+                     "interval": list(wilson(n_sep, n_all))}
+        out[fam] = {"runs": per_run, "pooled": pooled, "top1_reach": reach,
+                    "separable_misses": [{"truth": t, "verdict": v, "n": n}
+                                         for (t, v), n in misses.most_common()]}
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--since", type=int, default=31000,
+                    help="first evaluation seed of the earliest run to pool (default 31000)")
+    ap.add_argument("--families", default="ross,second")
+    args = ap.parse_args(argv)
+    runs = reports(args.since)
+    if not runs:
+        ap.error(f"no bench_gap_blind_<seeds>_<commit>.json report from seed {args.since} on "
+                 f"in {RESULTS}")
+    families = args.families.split(",")
+    pooled = pool(runs, families)
+    print(f"{len(runs)} runs: " + ", ".join(f"{s} ({c})" for s, c, _ in runs))
+    rows = []
+    for fam, d in pooled.items():
+        for name, p in d["pooled"].items():
+            rows.append([fam, name, f"{p['k']}/{p['n']}", f"{p['rate']:.3f}",
+                         f"{p['interval'][0]:.2f}-{p['interval'][1]:.2f}", p["runs"]])
+        if d["top1_reach"]:
+            r = d["top1_reach"]
+            rows.append([fam, "top1_reach (every separable single right)",
+                         f"{r['k']}/{r['n']}", f"{r['rate']:.3f}",
+                         f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
+                         d["pooled"]["top1_separable"]["runs"]])
+    table(rows, ["family", "pooled", "k/n", "rate", "95 % interval (Wilson)", "runs"])
+    print()
+    table([[fam, m["truth"], m["verdict"], m["n"]] for fam, d in pooled.items()
+           for m in d["separable_misses"]],
+          ["family", "separable single (truth)", "verdict", "trials"])
+    write_json("gap_blind_pooled", {
+        "command": "python benchmarks/pool_gap_blind.py " + " ".join(argv or sys.argv[1:]),
+        "runs": [{"seeds": s, "commit": c} for s, c, _ in runs], "families": pooled})
+
+
+if __name__ == "__main__":
+    main()
