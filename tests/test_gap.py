@@ -298,6 +298,8 @@ def test_inflating_a_harmonic_never_widens_its_own_tolerance(scale):
         (lambda d: d.assign(xO1=np.where(d.index == 5, np.nan, d.xO1)), "NaN"),
         (lambda d: d[d.speed < 150], "at least 4"),
         (lambda d: d.rename(columns={"xO1": "probe1"}), "No measured channel"),
+        (lambda d: pd.concat([d, d[d.speed == 120.0]], ignore_index=True),
+         "more than one record"),
     ],
 )
 def test_bad_measured_files_are_explained(mutate, match):

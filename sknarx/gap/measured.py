@@ -62,7 +62,14 @@ def check_measured(df: pd.DataFrame, channels=None):
                          "calibrate, the others held out between them).")
     sizes, rates = [], []
     for w, g in df.groupby("speed"):
-        dt = np.diff(g["t"].to_numpy())
+        t = g["t"].to_numpy()
+        if np.unique(t).size < t.size:
+            # two records at one speed (a run-down after the run-up, a repeat) sort into
+            # each other by t; name that rather than the unordered times it leaves
+            raise ValueError(f"Speed step {w:g} rad/s holds more than one record (its t "
+                             "values repeat): the diagnosis takes one record per speed "
+                             "step; keep one of them, or diagnose each pass on its own.")
+        dt = np.diff(t)
         if dt.size < 64 or np.any(dt <= 0):
             raise ValueError(f"Speed step {w:g} rad/s: needs at least 65 samples with strictly "
                              "increasing t.")
