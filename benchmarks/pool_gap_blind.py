@@ -41,6 +41,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, table, write_json  # noqa: E402
+from plants.families import LIB  # noqa: E402
 from rescore_gap_blind import wilson  # noqa: E402
 
 #: pooled rate -> (the report's rate, its denominator); a rate whose denominator a
@@ -55,8 +56,6 @@ RATES = {
         "unexplained_out_of_library_beyond_library", "n_out_of_library_beyond_library"),
 }
 REPORT = re.compile(r"bench_gap_blind_(\d+)_([0-9a-f]+)\.json$")
-#: verdict names of the out-of-library draws and of no effect: not separable-single misses
-NOT_IN_LIBRARY = ("no-gap", "line-50hz", "thermal-bow", "gear-mesh", "cage-fault")
 
 
 def reports(since, results=RESULTS):
@@ -95,7 +94,7 @@ def separable_misses(family_report):
     out = []
     for m in family_report.get("misclassified", []):
         truth, got = m["truth"], m["verdict"]
-        if isinstance(truth, str) and truth not in NOT_IN_LIBRARY and m.get("separable"):
+        if isinstance(truth, str) and truth in LIB and m.get("separable"):
             out.append((truth, got if isinstance(got, str) else " + ".join(got)))
     return out
 
