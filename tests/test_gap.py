@@ -375,6 +375,8 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     assert f"<td>2x</td><td>{by_order['2x']['n']}</td><td>{by_order['2x']['mean_z2']:.3g}" in html
     assert f"{doc['settings']['no_gap_per_feature']:.3g}" in html
     assert "Regenerate with" in html and doc["provenance"]["date_utc"] in html
+    # the verdict with what the data cannot tell it from beside it
+    assert doc["verdict"] == "runout" and "cannot tell the runout from a bent shaft" in html
     spread = doc["nominal_update"]["harmonic_spread"]
     assert spread["sigma_points"] > 0 and spread["max_m"] >= spread["median_m"] > 0
     assert f"spread over {spread['sigma_points']} sweeps" in html

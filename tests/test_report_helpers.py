@@ -57,3 +57,17 @@ def test_what_the_search_tested_reads_in_the_ranking_table_even_for_a_diverged_f
     assert _discrete_text(entry) == "held-out excess by setting: crack A-O1 120.2; crack O2-B inf"
     assert "support-flexibility: an effect (the linear form leaves 310)" in _linear_form_text(entry)
     assert _discrete_text({}) == _linear_form_text({}) == ""
+
+
+def test_a_verdict_naming_runout_says_a_bent_shaft_reads_the_same():
+    """The headline of a verdict names what such data cannot tell each named effect
+    from (its class's ``alike``): a runout, alone or in a pair, from a shaft bow; an
+    effect with nothing alike adds nothing."""
+    from sknarx.gap.report import _alike_text
+    from sknarx.rotor import EFFECTS
+
+    alone = _alike_text("runout")
+    assert alone.startswith(" These data cannot tell the runout from a bent shaft")
+    assert "a speed measured again after the sweep" in alone
+    assert _alike_text(["crack", "runout"]) == alone
+    assert _alike_text("crack") == "" and not EFFECTS["crack"].alike

@@ -178,6 +178,14 @@ def _undecided_text(doc) -> str:
             "resamples of the held-out speeds (see the ranking's evidence).")
 
 
+def _alike_text(verdict) -> str:
+    """What the data cannot tell each named effect from (its class's ``alike``), for the
+    headline of a verdict that names effects."""
+    names = [verdict] if isinstance(verdict, str) else list(verdict)
+    return "".join(f" These data cannot tell the {n} from {EFFECTS[n].alike}."
+                   for n in names if n in EFFECTS and EFFECTS[n].alike)
+
+
 def _rival_text(doc) -> str:
     """The verdict's note where the rival test set a pair aside
     (``sknarx.gap.core.rival_pair_set_aside``)."""
@@ -333,7 +341,8 @@ def _html(doc, figs, prov):
                     f"the no-gap floor {floor:.3g}." + _under_floor_text(doc)
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
-                    + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc))
+                    + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc)
+                    + _alike_text(verdict))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "

@@ -65,7 +65,7 @@ class Effect:
     Class attributes: ``name`` (canonical), ``bounds`` (``{param: (lo, hi, scale)}``
     with scale ``'lin'`` or ``'log'``), ``discrete`` (``{field: choices}``: settings the
     calibration searches over a list, such as where the effect acts), ``signature``
-    (expected evidence).
+    (expected evidence), ``alike`` (what such data cannot tell it from).
     """
 
     name = "none"
@@ -73,6 +73,9 @@ class Effect:
     discrete: dict = {}  # {field: choices} searched over a list (a location, a station)
     units: dict = {}  # {param: SI unit, "-" for a ratio}
     signature = ""
+    #: what a stepped sweep shows the same way: the physical causes such data cannot tell
+    #: from this effect, and the measurement that would (said beside a verdict naming it)
+    alike = ""
     #: the restricted form of this effect that only changes the linear rotor (an
     #: :class:`Effect` class, or None): what that form explains as well is model error,
     #: not this effect (see :meth:`linear_form_of`)
@@ -875,6 +878,14 @@ class ProbeRunout(Effect):
     projected_orders = (1.0, 2.0)
     units = {"amplitude": "m", "phase": "rad", "vectors": "m"}
     signature = "a constant 1x (or 2x) vector per probe, dominant at low speed"
+    # a bow fixed over the sweep is this runout plus a change of the disks' unbalance
+    # (benchmarks/bench_bow_equivalence.py: within 2-3 % of its 1x on every plant family);
+    # a relaxing one adds a smooth drift of 1x over a sweep whose speeds only rise
+    alike = ("a bent shaft: a bow fixed over the sweep is such a runout plus a change of the "
+             "disks' unbalance, and a bow relaxing as the rotor warms or cools adds a slow "
+             "drift of 1x over the sweep, which the nominal update can follow; a speed "
+             "measured again after the sweep, at another thermal state, tells them apart "
+             "(a probe's runout does not change, a relaxing bow does)")
 
     @classmethod
     def from_vector(cls, x):
