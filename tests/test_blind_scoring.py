@@ -517,6 +517,7 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
     separable singles over all detectable ones; a separable miss is counted by what the
     verdict named, a followed one and an out-of-library one are not."""
     import pool_gap_blind as pool
+    import rescore_gap_blind as rescore
 
     misses = [{"truth": "rub", "verdict": ["crack", "rub"], "separable": True},
               {"truth": "anisotropy", "verdict": "no-gap", "separable": False},
@@ -541,4 +542,4 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
     assert (p["out_of_library_within_noise"]["k"], p["out_of_library_within_noise"]["n"]) == (2, 5)
     assert (got["top1_reach"]["k"], got["top1_reach"]["n"]) == (15, 18)
     assert got["separable_misses"] == [{"truth": "rub", "verdict": "crack + rub", "n": 2}]
-    assert p["top1"]["interval"] == list(__import__("rescore_gap_blind").wilson(14, 18))
+    assert p["top1"]["interval"] == list(rescore.wilson(14, 18))
