@@ -113,19 +113,21 @@ def pool(runs, families):
             c = counts(d["scores"])
             per_run.append({"seeds": seed, "commit": commit, "trials": d["scores"]["n_trials"],
                             **{k: list(v) for k, v in c.items()}})
+            if "top1_separable" in c:  # the reach's denominator: runs with the split only
+                c["top1_with_split"] = c["top1"]
             for k, (a, b) in c.items():
                 total[k][0] += a
                 total[k][1] += b
                 total[k][2] += 1
             misses.update(separable_misses(d))
+        reach = None
+        if "top1_separable" in total:
+            n_sep, n_all = total["top1_separable"][1], total.pop("top1_with_split")[1]
+            reach = {"k": n_sep, "n": n_all, "rate": n_sep / n_all if n_all else float("nan"),
+                     "interval": list(wilson(n_sep, n_all))}
         pooled = {k: {"k": a, "n": b, "rate": a / b if b else float("nan"),
                       "interval": list(wilson(a, b)), "runs": r}
                   for k, (a, b, r) in total.items()}
-        reach = None
-        if "top1_separable" in total:
-            n_sep, n_all = total["top1_separable"][1], total["top1"][1]
-            reach = {"k": n_sep, "n": n_all, "rate": n_sep / n_all if n_all else float("nan"),
-                     "interval": list(wilson(n_sep, n_all))}
         out[fam] = {"runs": per_run, "pooled": pooled, "top1_reach": reach,
                     "separable_misses": [{"truth": t, "verdict": v, "n": n}
                                          for (t, v), n in misses.most_common()]}

@@ -532,6 +532,11 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
     runs = pool.reports(0, tmp_path)
     assert [(s, c) for s, c, _ in runs] == [(1000, "abc1234"), (3000, "def5678")]
     assert [s for s, _, _ in pool.reports(2000, tmp_path)] == [3000]
+    # a report from before the update split: in top-1's pool, not in its reach's
+    older = {"ross": {"scores": _scores(0.5, 4, None, 0.5, 2), "misclassified": []}}
+    wider = pool.pool([(500, "0123abc", {"families": older}), *runs], ["ross"])["ross"]
+    assert (wider["pooled"]["top1"]["k"], wider["pooled"]["top1"]["n"]) == (16, 22)
+    assert (wider["top1_reach"]["k"], wider["top1_reach"]["n"]) == (15, 18)
     got = pool.pool(runs, ["ross"])["ross"]
     p = got["pooled"]
     assert (p["top1"]["k"], p["top1"]["n"], p["top1"]["runs"]) == (6 + 8, 18, 2)
