@@ -343,8 +343,9 @@ def test_the_pair_thresholds_tried_after_the_39000_run_lose_verdicts_blind():
 def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_reproduce_it():
     """The 45000 run is the blind measure of the package as it stood before the
     rival-pair test (docs/gap_validation.md, *The 45000 run*): its report's decision
-    thresholds are the package's but for that test and the linear-form gain (neither
-    there then; the gain the default since the 49000 run), its logged trials
+    thresholds are the package's but for that test, the linear-form gain and the
+    attribution under the floor (none there then; the gain the default since the 49000
+    run, the attribution since the 51000 run), its logged trials
     decided again give the committed scores, and the pair thresholds tried after the
     39000 run gain one right in-library verdict on each plant there (ROSS 25 against 26,
     the second plant 26 against 27) -- over the three blind runs still none (ROSS 74
@@ -357,7 +358,10 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
     package = DiagnosisSettings()
     assert ran.pair_rival_shrink is None and package.pair_rival_shrink is not None
     assert ran.linear_form_gain is None and package.linear_form_gain is not None
-    for name in set(rescore.DECISION) - {"pair_rival_shrink", "linear_form_gain"}:
+    # the attribution under the floor the default since the 51000 run
+    assert ran.attribute_below_floor is False and package.attribute_below_floor is True
+    for name in set(rescore.DECISION) - {"pair_rival_shrink", "linear_form_gain",
+                                         "attribute_below_floor"}:
         assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
     tried = replace(ran, **TRIED_PAIR)
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
@@ -388,8 +392,8 @@ def test_the_47000_run_reproduces_from_its_logs_and_the_rival_test_changes_one_v
 
 
 def test_attribution_under_the_floor_decided_on_logged_runs_only_adds_right_verdicts():
-    """``attribute_below_floor`` (off in the package) decided on the logs of the 27000,
-    33000 and 47000 runs (docs/gap_validation.md, *Attribution under the floor*): each
+    """``attribute_below_floor`` (the default since the 51000 run) decided on the logs
+    of the 27000, 33000 and 47000 runs (docs/gap_validation.md, *Attribution under the floor*): each
     change is a sweep under the floor named by its true effect -- an anisotropy the
     update followed, two misalignments -- and no effect-free, out-of-library or right
     verdict moves."""
