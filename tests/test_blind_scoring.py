@@ -552,3 +552,23 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
     assert (got["top1_reach"]["k"], got["top1_reach"]["n"]) == (15, 18)
     assert got["separable_misses"] == [{"truth": "rub", "verdict": "crack + rub", "n": 2}]
     assert p["top1"]["interval"] == list(rescore.wilson(14, 18))
+
+
+def test_the_51000_run_decided_by_the_package_rule_names_one_more_right():
+    """The 51000 run's frozen decision (docs/gap_validation.md, *The 51000 run*): its
+    thresholds are the package's but for ``attribute_below_floor`` (off then, the
+    default since), and deciding its logs with the package's rule names the ROSS
+    anisotropy 51012 under the floor and moves nothing else on either plant."""
+    import rescore_gap_blind as rescore
+
+    ran, evals = _logged_run("results/bench_gap_blind_51000_d2868af.json", "9fe186a,d2868af")
+    package = DiagnosisSettings()
+    assert ran.attribute_below_floor is False and package.attribute_below_floor is True
+    for name in set(rescore.DECISION) - {"attribute_below_floor"}:
+        assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
+    now = replace(ran, attribute_below_floor=True)
+    assert _changed_verdicts(evals, ran, now) == {("ross", 51012, '"anisotropy"')}
+    before = {fam: _right_in_library(recs, ran) for fam, recs in evals.items()}
+    after = {fam: _right_in_library(recs, now) for fam, recs in evals.items()}
+    assert after == {"ross": before["ross"] + 1, "second": before["second"]}
+    assert blind.score(evals["ross"], now)["top1"] == pytest.approx(23 / 26)
