@@ -63,11 +63,11 @@ def test_a_verdict_naming_runout_says_a_bent_shaft_reads_the_same():
     """The headline of a verdict names what such data cannot tell each named effect
     from (its class's ``alike``): a runout, alone or in a pair, from a shaft bow; an
     effect with nothing alike adds nothing."""
-    from sknarx.gap.report import _alike_text
+    from sknarx.gap.report import alike_text
     from sknarx.rotor import EFFECTS
 
-    alone = _alike_text("runout")
+    alone = alike_text("runout")
     assert alone.startswith(" These data cannot tell the runout from a bent shaft")
     assert "a speed measured again after the sweep" in alone
-    assert _alike_text(["crack", "runout"]) == alone
-    assert _alike_text("crack") == "" and not EFFECTS["crack"].alike
+    assert alike_text(["crack", "runout"]) == alone
+    assert alike_text("crack") == "" and not EFFECTS["crack"].alike

@@ -12,6 +12,7 @@ import pandas as pd
 from .._report import figure, page, provenance, quantity, table, value_range
 from ..io import json_safe
 from ..plotting import plt, save
+from .report import alike_text
 
 __all__ = ["figures", "html_report", "write_bode_outputs"]
 
@@ -144,8 +145,11 @@ def html_report(doc, figs):
     band = doc.get("shrink_band")
     band_text = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)" if band
                  else "")
+    # what a named effect cannot be told from is stated where the verdict is
+    alike = (alike_text(doc["verdict"]).strip()
+             if doc["verdict"] not in ("no-gap", "unexplained") else "")
     body = f"""<h2>Verdict: {html.escape(v)} - {100 * doc['shrink']:.0f} % of the held-out gap
-removed{band_text}</h2>
+removed{band_text}</h2>{f'<p>{html.escape(alike)}</p>' if alike else ''}
 <h2>Nominal calibration</h2><p>The described rotor's first critical speed is
 {quantity(fc['nominal'], 'rpm')} {html.escape(measured_fc)}: the bearing stiffness was
 calibrated from {quantity(k['nominal'], 'N/m')} to {quantity(k['calibrated'], 'N/m')}

@@ -178,7 +178,7 @@ def _undecided_text(doc) -> str:
             "resamples of the held-out speeds (see the ranking's evidence).")
 
 
-def _alike_text(verdict) -> str:
+def alike_text(verdict) -> str:
     """What the data cannot tell each named effect from (its class's ``alike``), for the
     headline of a verdict that names effects."""
     names = [verdict] if isinstance(verdict, str) else list(verdict)
@@ -342,7 +342,7 @@ def _html(doc, figs, prov):
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
                     + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc)
-                    + _alike_text(verdict))
+                    + alike_text(verdict))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
