@@ -1,6 +1,7 @@
 """The same joint looseness on two readings of the paper rotor: what each makes of it.
 
-Run: ``python benchmarks/bench_gap_looseness_form.py [--seeds 51026,51058]``
+Run: ``python benchmarks/bench_gap_looseness_form.py [--seeds 51026,51058]
+[--joint-scales 0.5,0.25]``
 (writes ``benchmarks/results/bench_gap_looseness_form.json``). For each seed the
 second plant's looseness draw of the blind benchmark (``plants.families.draw_trial``:
 its ``residual`` and ``gap``) is put, with no parameter mismatch, no measurement effect
@@ -10,9 +11,12 @@ loosen the joint with the shaft through it beyond the same radial opening; what 
 is the rotor around it (the second plant's housings with mass, its shaft masses, its
 damper placement). The table is the looseness's own part of each order at the disk O1
 probes, ``|z(with) - z(without)|`` in um per speed: the 2x and the 1/2x it excites, and
-the 1x it shifts. It is analysis of why the second plant's looseness trials are missed
-(``docs/gap_validation.md``, *The second plant's looseness against the library's*),
-never a benchmark trial, and no threshold is set from it.
+the 1x it shifts. ``--joint-scales`` adds sknarx's rotor with the joint's preloaded
+stiffness (``k`` and ``kb``) scaled, the lever a third looseness parameter would add:
+whether a softer joint opens the way the second plant's does. It is analysis of why
+the second plant's looseness trials are missed (``docs/gap_validation.md``, *The
+second plant's looseness against the library's*), never a benchmark trial, and no
+threshold is set from it.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from _common import table, write_json  # noqa: E402
 from plants.families import CHANNELS, SPEEDS, draw_trial, simulate  # noqa: E402
 
 from sknarx.gap.features import order_features  # noqa: E402
+from sknarx.rotor import JointLooseness, RotorBearingSimulator, RotorParameters  # noqa: E402
 
 ORDERS = ("1/2x", "1x", "2x")
 PROBES = ("xO1", "yO1")
@@ -48,11 +53,32 @@ def phasors(family, truth, physical):
                 index=False)}
 
 
+def scaled_joint_phasors(loose, scale):
+    """:func:`phasors` of sknarx's nominal rotor with ``k`` and ``kb`` times ``scale``,
+    with and without the looseness (the own family's sweep: 1000 samples at 1 kHz a
+    step, 2 s settled)."""
+    b = RotorParameters()
+    params = b.replace(k=b.k * scale, kb=b.kb * scale)
+    out = []
+    for effects in ([JointLooseness(**loose)], []):
+        sweep = RotorBearingSimulator(params, effects=effects).sweep(
+            list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False)
+        f = order_features(sweep, list(CHANNELS), 0.0)
+        f = f[f.feature.isin(ORDERS) & f.channel.isin(PROBES)]
+        out.append({(float(s), o, c): complex(re, im) for s, o, c, re, im in
+                    f[["speed", "feature", "channel", "re", "im"]].itertuples(index=False)})
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="51026,51058",
                     help="seeds of the second plant's looseness draws (blind benchmark)")
+    ap.add_argument("--joint-scales", default="0.5,0.25",
+                    help="scales of sknarx's joint stiffness (k and kb) also run ('' none)")
     args = ap.parse_args()
+    scales = [float(x) for x in args.joint_scales.split(",") if x]
+    models = ["second", "own", *(f"own k+kb x{x:g}" for x in scales)]
     rows, out = [], []
     for seed in (int(s) for s in args.seeds.split(",")):
         truth = neutral(draw_trial("looseness", seed, "second"))
@@ -60,26 +86,29 @@ def main():
         t = time.perf_counter()
         own = {fam: (phasors(fam, truth, loose), phasors(fam, truth, {}))
                for fam in ("second", "own")}
+        for x, name in zip(scales, models[2:], strict=True):
+            own[name] = scaled_joint_phasors(loose["looseness"], x)
         part = {fam: {k: abs(w[k] - wo[k]) for k in w} for fam, (w, wo) in own.items()}
         for speed in SPEEDS:
             row = {"seed": seed, "speed_rad_s": float(speed)}
             for o in ORDERS:
-                for fam in ("second", "own"):
+                for fam in models:
                     row[f"{o} {fam}_um"] = float(max(part[fam][(float(speed), o, c)]
                                                      for c in PROBES) * 1e6)
             out.append(row)
             rows.append([seed, f"{speed:.1f}", *(f"{row[f'{o} {fam}_um']:.2f}"
-                                               for o in ORDERS for fam in ("second", "own"))])
+                                               for o in ORDERS for fam in models)])
         print(f"seed {seed}: residual {loose['looseness']['residual']:.4f}, gap "
               f"{loose['looseness']['gap'] * 1e6:.2f} um ({time.perf_counter() - t:.0f} s)",
               flush=True)
     table(rows, ["seed", "speed (rad/s)", *(f"{o} {fam} (um)" for o in ORDERS
-                                            for fam in ("second", "own"))])
+                                            for fam in models)])
     write_json("bench_gap_looseness_form", {
         "what": "the looseness's own part |z(with) - z(without)| of each order at the disk "
                 "O1 probes (the larger of x and y), um, on the second derivation and on "
                 "sknarx's simulator with the same residual and gap, no mismatch, no noise",
-        "seeds": [int(s) for s in args.seeds.split(",")], "rows": out})
+        "seeds": [int(s) for s in args.seeds.split(",")], "joint_scales": scales,
+        "rows": out})
 
 
 if __name__ == "__main__":
