@@ -44,13 +44,18 @@ def neutral(truth):
     return dict(truth, mismatch=m)
 
 
-def phasors(family, truth, physical):
-    """Complex order amplitudes (m) at the O1 probes, indexed by (speed, order, probe)."""
-    f = order_features(simulate(family, truth, physical), list(CHANNELS), 0.0)
+def _o1_phasors(sweep):
+    """Complex order amplitudes (m) of a sweep at the O1 probes, by (speed, order, probe)."""
+    f = order_features(sweep, list(CHANNELS), 0.0)
     f = f[f.feature.isin(ORDERS) & f.channel.isin(PROBES)]
     return {(float(s), o, c): complex(re, im)
             for s, o, c, re, im in f[["speed", "feature", "channel", "re", "im"]].itertuples(
                 index=False)}
+
+
+def phasors(family, truth, physical):
+    """:func:`_o1_phasors` of ``family``'s clean sweep with the ``physical`` effects."""
+    return _o1_phasors(simulate(family, truth, physical))
 
 
 def scaled_joint_phasors(loose, scale):
@@ -59,15 +64,9 @@ def scaled_joint_phasors(loose, scale):
     step, 2 s settled)."""
     b = RotorParameters()
     params = b.replace(k=b.k * scale, kb=b.kb * scale)
-    out = []
-    for effects in ([JointLooseness(**loose)], []):
-        sweep = RotorBearingSimulator(params, effects=effects).sweep(
-            list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False)
-        f = order_features(sweep, list(CHANNELS), 0.0)
-        f = f[f.feature.isin(ORDERS) & f.channel.isin(PROBES)]
-        out.append({(float(s), o, c): complex(re, im) for s, o, c, re, im in
-                    f[["speed", "feature", "channel", "re", "im"]].itertuples(index=False)})
-    return out
+    return [_o1_phasors(RotorBearingSimulator(params, effects=effects).sweep(
+                list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False))
+            for effects in ([JointLooseness(**loose)], [])]
 
 
 def main():
