@@ -13,7 +13,11 @@ damper placement). The table is the looseness's own part of each order at the di
 probes, ``|z(with) - z(without)|`` in um per speed: the 2x and the 1/2x it excites, and
 the 1x it shifts. ``--joint-scales`` adds sknarx's rotor with the joint's preloaded
 stiffness (``k`` and ``kb``) scaled, the lever a third looseness parameter would add:
-whether a softer joint opens the way the second plant's does. It is analysis of why
+whether a softer joint opens the way the second plant's does; ``--tilt-shares`` adds it
+with ``c_O1``, ``c_O2`` moved (that share) from the joint interface to the disks' tilt,
+the second plant's reading at 1. ``--update`` also runs the nominal update (no
+candidate) on each trial as measured and on its effect-free twin and reports the tilt
+share it settles on. It is analysis of why
 the second plant's looseness trials are missed (``docs/gap_validation.md``, *The
 second plant's looseness against the library's*), never a benchmark trial, and no
 threshold is set from it.
@@ -24,6 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -58,15 +63,37 @@ def phasors(family, truth, physical):
     return _o1_phasors(simulate(family, truth, physical))
 
 
-def scaled_joint_phasors(loose, scale):
-    """:func:`phasors` of sknarx's nominal rotor with ``k`` and ``kb`` times ``scale``,
-    with and without the looseness (the own family's sweep: 1000 samples at 1 kHz a
-    step, 2 s settled)."""
-    b = RotorParameters()
-    params = b.replace(k=b.k * scale, kb=b.kb * scale)
+def variant_phasors(loose, **change):
+    """:func:`phasors` of sknarx's nominal rotor with the ``RotorParameters`` fields
+    ``change``, with and without the looseness (the own family's sweep: 1000 samples at
+    1 kHz a step, 2 s settled)."""
+    params = RotorParameters().replace(**change)
     return [_o1_phasors(RotorBearingSimulator(params, effects=effects).sweep(
                 list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False))
             for effects in ([JointLooseness(**loose)], [])]
+
+
+def updated_tilt_share(seed):
+    """The nominal update's ``tilt_share_O`` (value, std) on the second plant's
+    looseness trial ``seed`` as measured (noise, mismatch) and on its effect-free,
+    noise-free twin (the same plant without the looseness): what the looseness does
+    to the update before any candidate is fitted."""
+    from plants.families import make_family_trial
+
+    from sknarx.gap import DiagnosisSettings, diagnose
+
+    measured, _, _, free = make_family_trial("looseness", seed, "second")
+    out = {}
+    for name, data in (("with_looseness", measured),
+                       ("effect_free", free[["speed", "t", *CHANNELS]])):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            d = diagnose(data, candidates=(),
+                         settings=DiagnosisSettings(attribute_below_floor=False))
+        p = next(p for p in d["nominal_update"]["parameters"]
+                 if p["parameter"] == "tilt_share_O")
+        out[name] = {"tilt_share_O": p["updated"], "std": p["std"]}
+    return out
 
 
 def main():
@@ -75,9 +102,20 @@ def main():
                     help="seeds of the second plant's looseness draws (blind benchmark)")
     ap.add_argument("--joint-scales", default="0.5,0.25",
                     help="scales of sknarx's joint stiffness (k and kb) also run ('' none)")
+    ap.add_argument("--tilt-shares", default="1",
+                    help="sknarx's rotor also run with these shares of c_O1, c_O2 on the "
+                         "disks' tilt (tilt_share_O; 1 is the second plant's reading)")
+    ap.add_argument("--update", action="store_true",
+                    help="also report the nominal update's tilt share on each trial, "
+                         "with and without its looseness (about a minute a seed)")
     args = ap.parse_args()
-    scales = [float(x) for x in args.joint_scales.split(",") if x]
-    models = ["second", "own", *(f"own k+kb x{x:g}" for x in scales)]
+    nominal = RotorParameters()
+    variants = {f"own k+kb x{x:g}": {"k": nominal.k * x, "kb": nominal.kb * x}
+                for x in (float(v) for v in args.joint_scales.split(",") if v)}
+    variants.update({f"own tilt share {x:g}": {"tilt_share_O": x}
+                     for x in (float(v) for v in args.tilt_shares.split(",") if v)})
+    models = ["second", "own", *variants]
+    updates = {}
     rows, out = [], []
     for seed in (int(s) for s in args.seeds.split(",")):
         truth = neutral(draw_trial("looseness", seed, "second"))
@@ -85,8 +123,8 @@ def main():
         t = time.perf_counter()
         own = {fam: (phasors(fam, truth, loose), phasors(fam, truth, {}))
                for fam in ("second", "own")}
-        for x, name in zip(scales, models[2:], strict=True):
-            own[name] = scaled_joint_phasors(loose["looseness"], x)
+        for name, change in variants.items():
+            own[name] = variant_phasors(loose["looseness"], **change)
         part = {fam: {k: abs(w[k] - wo[k]) for k in w} for fam, (w, wo) in own.items()}
         for speed in SPEEDS:
             row = {"seed": seed, "speed_rad_s": float(speed)}
@@ -97,6 +135,11 @@ def main():
             out.append(row)
             rows.append([seed, f"{speed:.1f}", *(f"{row[f'{o} {fam}_um']:.2f}"
                                                for o in ORDERS for fam in models)])
+        if args.update:
+            updates[seed] = updated_tilt_share(seed)
+            print(f"seed {seed}: the update's tilt share " + ", ".join(
+                f"{k.replace('_', ' ')} {v['tilt_share_O']:.3f} +- {v['std']:.3f}"
+                for k, v in updates[seed].items()), flush=True)
         print(f"seed {seed}: residual {loose['looseness']['residual']:.4f}, gap "
               f"{loose['looseness']['gap'] * 1e6:.2f} um ({time.perf_counter() - t:.0f} s)",
               flush=True)
@@ -106,8 +149,8 @@ def main():
         "what": "the looseness's own part |z(with) - z(without)| of each order at the disk "
                 "O1 probes (the larger of x and y), um, on the second derivation and on "
                 "sknarx's simulator with the same residual and gap, no mismatch, no noise",
-        "seeds": [int(s) for s in args.seeds.split(",")], "joint_scales": scales,
-        "rows": out})
+        "seeds": [int(s) for s in args.seeds.split(",")], "variants": variants,
+        "rows": out, "updated_tilt_share": updates})
 
 
 if __name__ == "__main__":
