@@ -16,8 +16,9 @@ stiffness (``k`` and ``kb``) scaled, the lever a third looseness parameter would
 whether a softer joint opens the way the second plant's does; ``--tilt-shares`` adds it
 with ``c_O1``, ``c_O2`` moved (that share) from the joint interface to the disks' tilt,
 the second plant's reading at 1. ``--update`` also runs the nominal update (no
-candidate) on each trial as measured and on its effect-free twin and reports the tilt
-share it settles on. It is analysis of why
+candidate) on each trial as measured and on its effect-free twin, started from either
+reading, and reports the tilt share it settles on with its chi2; ``--fit`` adds the
+looseness fitted on each update of the measured trial. It is analysis of why
 the second plant's looseness trials are missed (``docs/gap_validation.md``, *The
 second plant's looseness against the library's*), never a benchmark trial, and no
 threshold is set from it.
@@ -73,11 +74,14 @@ def variant_phasors(loose, **change):
             for effects in ([JointLooseness(**loose)], [])]
 
 
-def updated_tilt_share(seed):
-    """The nominal update's ``tilt_share_O`` (value, std) on the second plant's
-    looseness trial ``seed`` as measured (noise, mismatch) and on its effect-free,
-    noise-free twin (the same plant without the looseness): what the looseness does
-    to the update before any candidate is fitted."""
+def updated_tilt_share(seed, looseness_fit=False):
+    """The nominal update's ``tilt_share_O`` (value, std, chi2 after and prior penalty)
+    on the second plant's looseness trial ``seed`` as measured (noise, mismatch) and on
+    its effect-free, noise-free twin, the update started from sknarx's reading (share 0)
+    and from the second plant's (share 1): what the looseness does to the update before
+    any candidate is fitted. ``looseness_fit``: on the trial as measured, also the
+    looseness candidate fitted on each update (its shrink, log shrink and the verdict
+    with the looseness alone)."""
     from plants.families import make_family_trial
 
     from sknarx.gap import DiagnosisSettings, diagnose
@@ -86,13 +90,23 @@ def updated_tilt_share(seed):
     out = {}
     for name, data in (("with_looseness", measured),
                        ("effect_free", free[["speed", "t", *CHANNELS]])):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            d = diagnose(data, candidates=(),
-                         settings=DiagnosisSettings(attribute_below_floor=False))
-        p = next(p for p in d["nominal_update"]["parameters"]
-                 if p["parameter"] == "tilt_share_O")
-        out[name] = {"tilt_share_O": p["updated"], "std": p["std"]}
+        for share in (0.0, 1.0):
+            fit = looseness_fit and name == "with_looseness"
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                d = diagnose(data, base=RotorParameters(tilt_share_O=share),
+                             candidates=("looseness",) if fit else (), exhaustive=fit,
+                             settings=DiagnosisSettings(attribute_below_floor=False))
+            upd = d["nominal_update"]
+            p = next(p for p in upd["parameters"] if p["parameter"] == "tilt_share_O")
+            row = {"tilt_share_O": p["updated"], "std": p["std"],
+                   "chi2_after": upd["chi2"]["chi2_after"],
+                   "prior_penalty": upd["chi2"]["prior_penalty"]}
+            if fit:
+                r = d["ranking"][0]
+                row.update(looseness_shrink=r["shrink"], looseness_log_shrink=r["log_shrink"],
+                           verdict=d["verdict"], looseness_params=r["params"])
+            out[f"{name}, update from share {share:g}"] = row
     return out
 
 
@@ -107,7 +121,11 @@ def main():
                          "disks' tilt (tilt_share_O; 1 is the second plant's reading)")
     ap.add_argument("--update", action="store_true",
                     help="also report the nominal update's tilt share on each trial, "
-                         "with and without its looseness (about a minute a seed)")
+                         "with and without its looseness, from either reading (about "
+                         "two minutes a seed)")
+    ap.add_argument("--fit", action="store_true",
+                    help="with --update: also fit the looseness on each update of the "
+                         "trial as measured (a few minutes more a seed)")
     args = ap.parse_args()
     nominal = RotorParameters()
     variants = {f"own k+kb x{x:g}": {"k": nominal.k * x, "kb": nominal.kb * x}
@@ -136,10 +154,15 @@ def main():
             rows.append([seed, f"{speed:.1f}", *(f"{row[f'{o} {fam}_um']:.2f}"
                                                for o in ORDERS for fam in models)])
         if args.update:
-            updates[seed] = updated_tilt_share(seed)
-            print(f"seed {seed}: the update's tilt share " + ", ".join(
-                f"{k.replace('_', ' ')} {v['tilt_share_O']:.3f} +- {v['std']:.3f}"
-                for k, v in updates[seed].items()), flush=True)
+            updates[seed] = updated_tilt_share(seed, args.fit)
+            for k, v in updates[seed].items():
+                fitted = (f"; looseness shrink {v['looseness_shrink']:.3f}, log shrink "
+                          f"{v['looseness_log_shrink']:.3f}, verdict {v['verdict']}"
+                          if "verdict" in v else "")
+                print(f"seed {seed}, {k.replace('_', ' ')}: tilt share "
+                      f"{v['tilt_share_O']:.3f} +- {v['std']:.3f}, chi2 "
+                      f"{v['chi2_after']:.1f} + prior {v['prior_penalty']:.1f}{fitted}",
+                      flush=True)
         print(f"seed {seed}: residual {loose['looseness']['residual']:.4f}, gap "
               f"{loose['looseness']['gap'] * 1e6:.2f} um ({time.perf_counter() - t:.0f} s)",
               flush=True)
