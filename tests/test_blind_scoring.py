@@ -69,6 +69,15 @@ def _logged_runs_with_package_rule(runs):
         yield report, replace(ran, pair_rival_shrink=DiagnosisSettings().pair_rival_shrink), evals
 
 
+def _assert_decided_as(ran, package, but):
+    """A logged run's decision thresholds are ``package``'s, every one but ``but``
+    (the frozen floors agree to the report's rounding)."""
+    import rescore_gap_blind as rescore
+
+    for name in set(rescore.DECISION) - set(but):
+        assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
+
+
 def _right_in_library(recs, settings):
     """How many detectable in-library trials (singles and pairs) ``settings`` decides
     right."""
@@ -352,7 +361,6 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
     against 72, the second plant 83 against 83). The package's rival-pair test
     (``pair_rival_shrink``) on its logs turns two pairs into their right single (ROSS
     crack 45008, the second plant's rub 45001) and changes no other verdict."""
-    import rescore_gap_blind as rescore
 
     ran, evals = _logged_run("results/bench_gap_blind_45000_233690b.json", "233690b,1ac0d21")
     package = DiagnosisSettings()
@@ -360,9 +368,8 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
     assert ran.linear_form_gain is None and package.linear_form_gain is not None
     # the attribution under the floor the default since the 51000 run
     assert ran.attribute_below_floor is False and package.attribute_below_floor is True
-    for name in set(rescore.DECISION) - {"pair_rival_shrink", "linear_form_gain",
-                                         "attribute_below_floor"}:
-        assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
+    _assert_decided_as(ran, package, but={"pair_rival_shrink", "linear_form_gain",
+                                          "attribute_below_floor"})
     tried = replace(ran, **TRIED_PAIR)
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
     counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, tried))
@@ -559,13 +566,11 @@ def test_the_51000_run_decided_by_the_package_rule_names_one_more_right():
     thresholds are the package's but for ``attribute_below_floor`` (off then, the
     default since), and deciding its logs with the package's rule names the ROSS
     anisotropy 51012 under the floor and moves nothing else on either plant."""
-    import rescore_gap_blind as rescore
 
     ran, evals = _logged_run("results/bench_gap_blind_51000_d2868af.json", "9fe186a,d2868af")
     package = DiagnosisSettings()
     assert ran.attribute_below_floor is False and package.attribute_below_floor is True
-    for name in set(rescore.DECISION) - {"attribute_below_floor"}:
-        assert getattr(ran, name) == pytest.approx(getattr(package, name), abs=5e-4), name
+    _assert_decided_as(ran, package, but={"attribute_below_floor"})
     now = replace(ran, attribute_below_floor=True)
     assert _changed_verdicts(evals, ran, now) == {("ross", 51012, '"anisotropy"')}
     before = {fam: _right_in_library(recs, ran) for fam, recs in evals.items()}
