@@ -1,7 +1,7 @@
 """The same joint looseness on two readings of the paper rotor: what each makes of it.
 
 Run: ``python benchmarks/bench_gap_looseness_form.py [--seeds 51026,51058]
-[--joint-scales 0.5,0.25]``
+[--joint-scales 0.5,0.25] [--tilt-shares 1] [--update [--fit]]``
 (writes ``benchmarks/results/bench_gap_looseness_form.json``). For each seed the
 second plant's looseness draw of the blind benchmark (``plants.families.draw_trial``:
 its ``residual`` and ``gap``) is put, with no parameter mismatch, no measurement effect
@@ -37,7 +37,7 @@ from _common import table, write_json  # noqa: E402
 from plants.families import CHANNELS, SPEEDS, draw_trial, simulate  # noqa: E402
 
 from sknarx.gap.features import order_features  # noqa: E402
-from sknarx.rotor import JointLooseness, RotorBearingSimulator, RotorParameters  # noqa: E402
+from sknarx.rotor import RotorParameters  # noqa: E402
 
 ORDERS = ("1/2x", "1x", "2x")
 PROBES = ("xO1", "yO1")
@@ -59,19 +59,10 @@ def _o1_phasors(sweep):
                 index=False)}
 
 
-def phasors(family, truth, physical):
-    """:func:`_o1_phasors` of ``family``'s clean sweep with the ``physical`` effects."""
-    return _o1_phasors(simulate(family, truth, physical))
-
-
-def variant_phasors(loose, **change):
-    """:func:`phasors` of sknarx's nominal rotor with the ``RotorParameters`` fields
-    ``change``, with and without the looseness (the own family's sweep: 1000 samples at
-    1 kHz a step, 2 s settled)."""
-    params = RotorParameters().replace(**change)
-    return [_o1_phasors(RotorBearingSimulator(params, effects=effects).sweep(
-                list(SPEEDS), fs=1000.0, n_samples=1000, settle=2.0, progress=False))
-            for effects in ([JointLooseness(**loose)], [])]
+def phasors(family, truth, physical, plant=None):
+    """:func:`_o1_phasors` of ``family``'s clean sweep with the ``physical`` effects
+    (``plant``: the family's plant fields changed, see ``plants.families.simulate``)."""
+    return _o1_phasors(simulate(family, truth, physical, plant))
 
 
 def updated_tilt_share(seed, looseness_fit=False):
@@ -142,7 +133,7 @@ def main():
         own = {fam: (phasors(fam, truth, loose), phasors(fam, truth, {}))
                for fam in ("second", "own")}
         for name, change in variants.items():
-            own[name] = variant_phasors(loose["looseness"], **change)
+            own[name] = (phasors("own", truth, loose, change), phasors("own", truth, {}, change))
         part = {fam: {k: abs(w[k] - wo[k]) for k in w} for fam, (w, wo) in own.items()}
         for speed in SPEEDS:
             row = {"seed": seed, "speed_rad_s": float(speed)}

@@ -110,16 +110,16 @@ def draw_trial(kind, seed, family):
 # Each family's sweep: ``speeds`` None is the module's SPEEDS read at call time
 # (bench_gap_cost.py sets 19 steps there); a relaxing bow passes one step at a time.
 def _own_sweep(truth, physical, settle, plant=None, speeds=None):
-    if plant:
-        raise ValueError("the own family has no plant variants")
     from sknarx.rotor import EFFECTS, RotorBearingSimulator, RotorParameters
 
+    # ``plant``: RotorParameters fields set after the mismatch (a variant for analysis)
     m, b = truth["mismatch"], RotorParameters()
     params = b.replace(
         k1=b.k1 * m["k1"], k2=b.k2 * m["k2"],
         **{c: getattr(b, c) * m[c] for c in ("c_a", "c_b", "c_d1", "c_d2", "c_O1", "c_O2")},
         kB=b.kB * m["kB_A"], kB_B=b.kB * m["kB_B"], e=b.e * m["e_O1"], e_O2=b.e * m["e_O2"],
-        unbalance_phase=m["unbalance_phase"], beta=b.beta + m["beta_error"])
+        unbalance_phase=m["unbalance_phase"], beta=b.beta + m["beta_error"],
+        **(plant or {}))
     effects = []
     for name, p in physical.items():
         if name == "crack":
@@ -263,9 +263,10 @@ def measure(clean, truth):
 def make_family_trial(kind, seed, family, plant=None):
     """Measured sweep, truth, and the clean sweeps with and without the effects.
 
-    ``plant``: fields of the family's plant to change (``second``: ``SecondRotor``;
-    ``ross``: ``PaperRotorROSS``, e.g. its ``crack_form``); for analysing what of a gap
-    a plant's reading causes -- the benchmark never sets it.
+    ``plant``: fields of the family's plant to change (``own``: ``RotorParameters``;
+    ``second``: ``SecondRotor``; ``ross``: ``PaperRotorROSS``, e.g. its
+    ``crack_form``); for analysing what of a gap a plant's reading causes -- the
+    benchmark never sets it.
     """
     truth = draw_trial(kind, seed, family)
     physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
