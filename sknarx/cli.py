@@ -116,6 +116,9 @@ def _gap(args) -> int:
             logger.info("[%6.1f s] %s", time.perf_counter() - start, msg)
 
         kw = {"candidates": tuple(args.candidates)} if args.candidates else {}
+        if cfg.get("readings"):
+            # the rotor file's alternative readings of its own model (docs/gap.md)
+            kw["readings"] = cfg["readings"]
         if args.no_update:
             from dataclasses import replace
 
@@ -130,7 +133,9 @@ def _gap(args) -> int:
         doc = write_gap_outputs(result, out, _command_line(), narx)
     print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
           + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
-             if doc.get("model_error") else ""))
+             if doc.get("model_error") else "")
+          + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
+             if doc.get("rotor_reading") else ""))
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
     return 0
 

@@ -59,6 +59,7 @@ from .core import (
     order_mean_z2,
     orders_over_floor,
     public_ranking,
+    rank,
     recheck_choice,
     run_parallel,
     search,
@@ -67,6 +68,7 @@ from .core import (
 )
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import HARMONIC_TOL, circular_components, regions, whirl_pairs
+from .readings import check_readings, reading_contenders
 from .result import GapDiagnosis
 from .settings import DiagnosisSettings
 from .updating import linear_1x, update_nominal_model
@@ -471,7 +473,7 @@ class _SweepFrontEnd(FrontEnd):
 
 def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
              candidates=LIBRARY, settings: DiagnosisSettings | None = None,
-             progress=None, exhaustive: bool = False) -> GapDiagnosis:
+             progress=None, exhaustive: bool = False, readings=None) -> GapDiagnosis:
     """Diagnose a stepped-speed measurement against the nominal simulator.
 
     Parameters
@@ -492,6 +494,14 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         Called with a short message after each phase (default: the package logger).
     exhaustive : bool
         Search the candidates even when the gap is within the noise floor.
+    readings : mapping, optional
+        Alternative readings of the nominal rotor, ``{label: {parameter: value}}``
+        (:class:`~sknarx.rotor.RotorParameters` fields in SI units): model-form choices
+        the rotor's description leaves open, such as ``{"joint dampers on the disks'
+        tilt": {"tilt_share_O": 1.0}}``. Each is a discrete setting of the rotor the
+        data choose on the held-out speeds (:mod:`sknarx.gap.readings`); the reading of
+        the verdict is reported as model error (``rotor_reading``). None: the rotor as
+        given only.
 
     Returns
     -------
@@ -516,10 +526,11 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     # measured, one evaluation of 10 speeds 50 ms with one BLAS thread, 100 ms with two
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(measured, base, channels, candidates, settings, progress,
-                         exhaustive)
+                         exhaustive, check_readings(readings))
 
 
-def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive):
+def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive,
+              readings):
     from .measured import check_measured
 
     settings = settings or DiagnosisSettings()
@@ -529,7 +540,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         raise ValueError(f"Unknown effect(s) {unknown}; the library has {', '.join(LIBRARY)}.")
     measured, info = check_measured(measured, channels)
     channels = info["channels"]
-    base = base or RotorParameters()
+    base = nominal_base = base or RotorParameters()
     # transient or settled is read from the records, not assumed from their time axis:
     # settled records are compared with settled simulations and have no transient window
     decay = free_response_decay(measured, channels)
@@ -567,18 +578,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 
-    # the nuisance-only model: start its unbalance phase from the 1x phase difference
-    nominal = nominal_all[nominal_all.speed.isin(train)]
-    m1 = meas[(meas.feature == "1x") & meas.speed.isin(train)]
-    s1 = nominal.set_index(["speed", "window", "channel", "feature"]).reindex(
-        pd.MultiIndex.from_frame(m1[["speed", "window", "channel", "feature"]]))
-    dphi = float(np.angle(np.sum((m1.re.to_numpy() + 1j * m1.im.to_numpy())
-                                 * np.conj(s1.re.to_numpy() + 1j * s1.im.to_numpy()))))
-    start = np.array([1.0, dphi, 1.0, 1.0])
-    cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev,
-                     jacobian_refresh=settings.jacobian_refresh,
-                     settled_sigma=settings.settled_sigma)
-    E0, cmp0 = heldout_gap(model, meas, held, cal0, ())
+    cal0, E0, cmp0 = _nuisance_fit(model, meas, train, held, settings,
+                                   nominal_all[nominal_all.speed.isin(train)])
     _, cmp_all = heldout_gap(model, meas, speeds, cal0, ())
     tick("nuisance calibration")
     e0 = E0 / max(len(cmp0), 1)
@@ -628,14 +629,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         doc["verdict"] = "no-gap"
         return result
 
-    # the nuisance-only fit absorbs what it can of an effect (a crack's loss of mean
-    # stiffness pulls the stiffness scale to 0.87, say) and a candidate started there
-    # stays in that basin; candidates start from the rig's nominal stiffness and
-    # damping instead (a rig's mismatch is a few per cent), with the fitted unbalance
-    nuis_start = cal0.x.copy()
-    nuis_start[[list(NUISANCE).index("stiffness_scale"),
-                list(NUISANCE).index("damping_scale")]] = 1.0
-    front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, nuis_start)
+    front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, _candidate_start(cal0))
     logger.info("held-out gap %.3g per feature (no-gap floor %.3g)%s: fitting %d effect "
                 "candidate(s)", e0, settings.no_gap_per_feature,
                 "".join(f", {k} mean z2 {v:.3g} over its floor {floors[k]:.3g}"
@@ -643,18 +637,114 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ranked = search(front, candidates, E0, cmp0, n_features, settings, tick)
+    fronts = {None: front}
+    if readings:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ranked, doc["rotor_readings"] = _in_other_readings(
+                readings, ranked, fronts, nominal_base, meas, (train, held), channels, info,
+                (transient_s, settle_s), model, settings, (E0, cmp0, n_features), tick)
     choice = decide(e0, ranked, settings, n_features, over)
     if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            choice, ranked = recheck_choice(front, choice, ranked, E0, cmp0, settings,
-                                            n_features, e0, over)
+            choice, ranked = recheck_choice(_ByReading(fronts), choice, ranked, E0, cmp0,
+                                            settings, n_features, e0, over)
         tick("verdict's other settings refitted from its fit")
     doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
     if isinstance(choice, dict):
         result.tables["after"] = choice["_cmp"]
+        reading = choice.get("rotor_reading")
+        if reading is not None:
+            # the verdict's rotor is the reading it was fitted in, updated
+            doc["rotor_reading"] = {"label": reading, "changes": readings[reading]}
+            result.base = fronts[reading].model.base
     doc["ranking"] = public_ranking(ranked)
     return result
+
+
+def _nuisance_fit(model, meas, train, held, settings, nominal_train):
+    """The nuisance-only model (no effect) calibrated on the training speeds, its
+    unbalance phase started from the 1x phase against ``nominal_train`` (the model's
+    own training-speed features): the fit, its held-out excess and comparison table."""
+    m1 = meas[(meas.feature == "1x") & meas.speed.isin(train)]
+    s1 = nominal_train.set_index(["speed", "window", "channel", "feature"]).reindex(
+        pd.MultiIndex.from_frame(m1[["speed", "window", "channel", "feature"]]))
+    dphi = float(np.angle(np.sum((m1.re.to_numpy() + 1j * m1.im.to_numpy())
+                                 * np.conj(s1.re.to_numpy() + 1j * s1.im.to_numpy()))))
+    start = np.array([1.0, dphi, 1.0, 1.0])
+    cal0 = calibrate(model, meas, train, (), starts=[start], max_nfev=settings.max_nfev,
+                     jacobian_refresh=settings.jacobian_refresh,
+                     settled_sigma=settings.settled_sigma)
+    E0, cmp0 = heldout_gap(model, meas, held, cal0, ())
+    return cal0, E0, cmp0
+
+
+def _candidate_start(cal0):
+    """Where candidates start: the nuisance-only fit's unbalance at nominal stiffness and
+    damping scales. The nuisance-only fit absorbs what it can of an effect (a crack's
+    loss of mean stiffness pulls the stiffness scale to 0.87, say) and a candidate
+    started there stays in that basin; a rig's mismatch is a few per cent."""
+    start = cal0.x.copy()
+    start[[list(NUISANCE).index("stiffness_scale"),
+           list(NUISANCE).index("damping_scale")]] = 1.0
+    return start
+
+
+def _in_other_readings(readings, ranked, fronts, nominal_base, meas, split, channels, info,
+                       windows, model, settings, before, tick):
+    """The ranking with each other reading's fits added (:mod:`sknarx.gap.readings`):
+    per reading, the nominal update started at it, its nuisance-only model (model error
+    alone) and the search over the primary ranking's ``settings.reading_contenders``
+    best singles, all against the primary's features and tolerance (``before``: its
+    held-out excess, comparison table and feature count). ``fronts`` gains each
+    reading's front end by label. Returns the ranking and the document's
+    ``rotor_readings`` entries."""
+    train, held = split
+    E0, cmp0, n_features = before
+    names = reading_contenders(ranked, settings.reading_contenders)
+    fits = [r["_fit"] for r in ranked]
+    nuis0 = np.array([v[3] for v in NUISANCE.values()])
+    entries = []
+    for label, changes in readings.items():
+        logger.info("rotor reading %r (%s): updating from it, then the nuisance-only model "
+                    "and %s", label, ", ".join(f"{k} = {v:g}" for k, v in changes.items()),
+                    ", ".join(names) or "no candidate")
+        base = nominal_base.replace(**changes)
+        update = None
+        if settings.update_nominal:
+            update = _update_nominal(meas, train, channels, base, info, *windows, settings)
+            base = update.params
+        model_r = dataclasses.replace(model, base=base)
+        cal, E, cmp = _nuisance_fit(model_r, meas, train, held, settings,
+                                    model_r.features(train, nuis0))
+        alone = CandidateFit(
+            names=(), params={}, params_std={}, n_params=0, heldout_excess=E, cmp=cmp,
+            details={"nuisance": cal.nuisance, "rotor_reading": label,
+                     "evidence": table_evidence(cmp0, cmp)}, state=cal)
+        front = _SweepFrontEnd(model_r, meas, train, held, cmp0, settings,
+                               _candidate_start(cal))
+        fronts[label] = front
+        found = search(front, names, E0, cmp0, n_features, settings) if names else []
+        for f in (r["_fit"] for r in found):
+            f.details["rotor_reading"] = label
+        fits += [alone, *(r["_fit"] for r in found)]
+        entries.append({"label": label, "changes": changes,
+                        "heldout_gap_alone": E, "contenders": list(names),
+                        "nominal_update": _update_summary(update)})
+        tick(f"rotor reading {label!r}")
+    return rank(fits, E0, cmp0), entries
+
+
+class _ByReading(FrontEnd):
+    """The front end of the reading each fit was made in (``rotor_reading``; None: the
+    nominal rotor as given), for the verdict's recheck of its discrete settings."""
+
+    def __init__(self, fronts):
+        self.fronts = fronts
+
+    def recheck_setting(self, fit):
+        return self.fronts[fit.details.get("rotor_reading")].recheck_setting(fit)
 
 
 def _plain_params(classes, effect_params):

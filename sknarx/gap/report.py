@@ -127,6 +127,35 @@ _CLASSES = {**{c.linear_form.name: c.linear_form for c in EFFECTS.values()
                if c.linear_form is not None}, **EFFECTS}
 
 
+def _candidate_label(entry) -> str:
+    """A ranking entry's name in the report: its effects, or model error only, and the
+    rotor reading it was fitted in where it was not the rotor as given."""
+    name = _label(entry["effect"])
+    reading = entry.get("rotor_reading")
+    if reading is None:
+        return name or "model error only"
+    return f"{name} (in reading {reading!r})" if name else f"rotor reading {reading!r} alone"
+
+
+def _changes_text(changes) -> str:
+    """A reading's parameter changes as text."""
+    return ", ".join(f"{k} = {v:g}" for k, v in changes.items())
+
+
+def _reading_text(doc) -> str:
+    """The verdict's rotor reading, where it was fitted in one (model error)."""
+    reading = doc.get("rotor_reading")
+    if not reading:
+        return ""
+    alone = next((r["heldout_gap_alone"] for r in doc.get("rotor_readings", [])
+                  if r["label"] == reading["label"]), None)
+    return (f" Fitted in the rotor's reading {reading['label']!r} "
+            f"({_changes_text(reading['changes'])}), chosen on the held-out speeds over "
+            "the rotor as given: model error, not part of the effect"
+            + (f" (the reading alone leaves a held-out excess of {alone:.4g})."
+               if isinstance(alone, (int, float)) else "."))
+
+
 def _model_error_text(error) -> str:
     """A candidate's model error (linear forms of members that were no effect)."""
     return "; ".join(f"{name}: {effect_parameters(name, values)}"
@@ -315,7 +344,14 @@ def _html(doc, figs, prov):
     upd = doc.get("nominal_update") or {}
     updated = "updated " if upd else ""
     error = _model_error_text(doc.get("model_error"))
-    if verdict == "no-gap" and error:
+    reading = doc.get("rotor_reading")
+    if verdict == "no-gap" and reading:
+        headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
+                    f"{floor:.3g}, is the rotor's reading {reading['label']!r} "
+                    f"({_changes_text(reading['changes'])}), not an effect: model error, "
+                    "which the held-out speeds chose over the rotor as given and over "
+                    "every candidate." + (f" Fitted with it: {error}." if error else ""))
+    elif verdict == "no-gap" and error:
         headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
                     f"{floor:.3g}, is a change of the linear rotor, not an effect: "
                     f"{error}. A change of linear parameters is model error, however much "
@@ -341,6 +377,7 @@ def _html(doc, figs, prov):
                     f"the no-gap floor {floor:.3g}." + _under_floor_text(doc)
                     + (f" Fitted with it, as model error (a change of the linear rotor, "
                        f"not an effect): {error}." if error else "")
+                    + _reading_text(doc)
                     + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc)
                     + alike_text(verdict))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
@@ -355,7 +392,7 @@ def _html(doc, figs, prov):
         empty="No speed x order x channel cell differs significantly (z^2 > 9) from the "
               "calibrated nominal model.")
     which = table(
-        ([_label(r["effect"]) or "model error only", f"{100 * r['shrink']:.0f} %",
+        ([_candidate_label(r), f"{100 * r['shrink']:.0f} %",
           quantity(r["heldout_gap_after"]),
           "; ".join(t for t in (effect_parameters(r["effect"], r["params"]),
                                 _model_error_text(r.get("model_error"))) if t),

@@ -136,6 +136,10 @@ class DiagnosisSettings:
     # in this share of bootstrap resamples (sknarx.gap.core.setting_support): stated,
     # like the shrink's 5-95 % band, not fitted
     decided_setting_support: float = 0.95
+    # with alternative rotor readings (diagnose's ``readings``), the primary ranking's
+    # best singles fitted again in each reading (sknarx.gap.readings): the search in a
+    # reading is the whole search over these, so its cost grows with them
+    reading_contenders: int = 2
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
