@@ -119,6 +119,13 @@ def test_bad_rotor_file(tmp_path, out):
                               str(tmp_path / "none.toml"), "--out", out), "no rotor file")
 
 
+def test_a_rotor_file_reading_of_an_unknown_parameter(tmp_path, out):
+    (tmp_path / "r.toml").write_text('[readings."dampers on the tilt"]\ntilt_shar_O = 1.0\n')
+    assert_one_line_error(run("gap", "--measured", str(steps(tmp_path)), "--rotor",
+                              str(tmp_path / "r.toml"), "--out", out),
+                          "dampers on the tilt", "tilt_shar_O", "RotorParameters")
+
+
 def test_out_is_a_file(tmp_path):
     (tmp_path / "f").write_text("x")
     assert_one_line_error(run("gap", "--measured", str(steps(tmp_path)), "--out",
