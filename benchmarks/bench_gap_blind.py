@@ -150,7 +150,7 @@ def plan(n, seed0, family):
     return [(k, seed0 + i) for i, k in enumerate(kinds[:n])]
 
 
-def run_trial(kind, seed, family, settings, exhaustive=True):
+def run_trial(kind, seed, family, settings, exhaustive=True, readings=None):
     t = time.perf_counter()
     try:
         measured, truth, oracle, free = make_family_trial(kind, seed, family)
@@ -160,7 +160,7 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        d = diagnose(measured, settings=settings, exhaustive=exhaustive)
+        d = diagnose(measured, settings=settings, exhaustive=exhaustive, readings=readings)
     elapsed = time.perf_counter() - t
     held = d["split"]["heldout_speeds"]
     E0 = d["gap_before"]["heldout_excess"]
@@ -187,7 +187,7 @@ def run_trial(kind, seed, family, settings, exhaustive=True):
                      # the excess cannot resolve under the floor) is decided from the log
                      "params_std": r.get("params_std"),
                      **{k: r[k] for k in ("model_error", "replaces", "linear_form_tests",
-                                          "discrete_settings") if r.get(k)},
+                                          "discrete_settings", "rotor_reading") if r.get(k)},
                      **({"setting_decided": r["setting_decided"]}
                         if "setting_decided" in r else {})}
                     for r in d["ranking"]],
@@ -543,10 +543,14 @@ def fit_thresholds(pilot, base):
     return replace(base, **dict(zip(names, pick, strict=True)))
 
 
-def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaustive=True):
-    """Run (or reload) the (kind, seed) ``trials`` of one phase and family."""
+def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaustive=True,
+        readings=None):
+    """Run (or reload) the (kind, seed) ``trials`` of one phase and family (``readings``:
+    the diagnosis's alternative readings of the rotor, part of the log key)."""
     commit = git_commit()
     code = code_hash() + str([getattr(settings, f) for f in SEARCH_FIELDS])
+    if readings:
+        code += str(readings)
     k, n_shards = shard
     suffix = f".shard{k}of{n_shards}" if n_shards > 1 else ""
     log = RESULTS / f"gap_blind_{phase}_{family}{suffix}.jsonl"
@@ -568,7 +572,7 @@ def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaus
             continue
         if i % n_shards != k or report_only:
             continue
-        r = run_trial(kind, seed, family, settings, exhaustive)
+        r = run_trial(kind, seed, family, settings, exhaustive, readings)
         r["commit"], r["code"] = commit, code
         with log.open("a") as f:
             f.write(json.dumps(r, default=float) + "\n")
@@ -610,6 +614,25 @@ def updates_on_effect_free(recs):
     return out
 
 
+def parse_readings(ap, items):
+    """``LABEL:PARAM=VALUE[,PARAM=VALUE]`` items as diagnose's ``readings`` (None for
+    none); a malformed item is ``ap``'s usage error."""
+    out = {}
+    for item in items:
+        label, sep, rest = item.partition(":")
+        changes = {}
+        for pair in rest.split(","):
+            key, eq, value = pair.partition("=")
+            try:
+                changes[key.strip()] = float(value)
+            except ValueError:
+                eq = ""
+            if not (sep and eq and label.strip()):
+                ap.error(f"--reading: {item!r} is not LABEL:PARAM=NUMBER[,PARAM=NUMBER]")
+        out[label.strip()] = changes
+    return out or None
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--families", default="second,ross,own",
@@ -623,7 +646,12 @@ def main():
                     help="K/N: run every N-th trial from the K-th (parallel processes)")
     ap.add_argument("--report-only", action="store_true",
                     help="write the report from the logged trials, running none")
+    ap.add_argument("--reading", action="append", default=[], metavar="LABEL:PARAM=VALUE",
+                    help="an alternative reading of the rotor the evaluation trials are "
+                         "diagnosed with (diagnose's readings; repeatable), e.g. "
+                         "'tilt:tilt_share_O=1'; the null trials set the floor without it")
     args = ap.parse_args()
+    readings = parse_readings(ap, args.reading)
     shard = tuple(int(v) for v in args.shard.split("/"))
     families = args.families.split(",")
     RESULTS.mkdir(exist_ok=True)
@@ -639,7 +667,7 @@ def main():
     for fam in families:
         print(f"evaluation trials ({fam})", flush=True)
         evals[fam] = run(plan(args.trials, args.eval_seed, fam), "eval", fam, base, shard,
-                         args.report_only)
+                         args.report_only, readings=readings)
     if shard[1] > 1:
         print("shard done; run without --shard to write the report")
         return
