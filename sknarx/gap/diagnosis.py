@@ -556,10 +556,13 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
                 if starts_transient else "records are settled steady states")
     meas = order_features(measured, channels, transient_s)
     tick("measured order features")
+    def update_from(start):
+        return _update_nominal(meas, train, channels, start, info, transient_s, settle_s,
+                               settings)
+
     update = None
     if settings.update_nominal:
-        update = _update_nominal(meas, train, channels, base, info, transient_s, settle_s,
-                                 settings)
+        update = update_from(base)
         base = update.params
         tick("nominal model updating")
     model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
@@ -642,8 +645,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ranked, doc["rotor_readings"] = _in_other_readings(
-                readings, ranked, fronts, nominal_base, meas, (train, held), channels, info,
-                (transient_s, settle_s), model, settings, (E0, cmp0, n_features), tick)
+                readings, ranked, fronts, nominal_base, update_from, model, meas,
+                (train, held), settings, (E0, cmp0, n_features), tick)
     choice = decide(e0, ranked, settings, n_features, over)
     if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
         with warnings.catch_warnings():
@@ -691,15 +694,16 @@ def _candidate_start(cal0):
     return start
 
 
-def _in_other_readings(readings, ranked, fronts, nominal_base, meas, split, channels, info,
-                       windows, model, settings, before, tick):
+def _in_other_readings(readings, ranked, fronts, nominal_base, update_from, model, meas,
+                       split, settings, before, tick):
     """The ranking with each other reading's fits added (:mod:`sknarx.gap.readings`):
-    per reading, the nominal update started at it, its nuisance-only model (model error
-    alone) and the search over the primary ranking's ``settings.reading_contenders``
-    best singles, all against the primary's features and tolerance (``before``: its
-    held-out excess, comparison table and feature count). ``fronts`` gains each
-    reading's front end by label. Returns the ranking and the document's
-    ``rotor_readings`` entries."""
+    per reading, the nominal update started at it (``update_from``: the update from a
+    rotor), its nuisance-only model (model error alone) and the search over the
+    primary ranking's ``settings.reading_contenders`` best singles, all against the
+    primary's features ``meas`` and tolerance (``before``: its held-out excess,
+    comparison table and feature count; ``split``: training and held-out speeds).
+    ``fronts`` gains each reading's front end by label. Returns the ranking and the
+    document's ``rotor_readings`` entries."""
     train, held = split
     E0, cmp0, n_features = before
     names = reading_contenders(ranked, settings.reading_contenders)
@@ -713,7 +717,7 @@ def _in_other_readings(readings, ranked, fronts, nominal_base, meas, split, chan
         base = nominal_base.replace(**changes)
         update = None
         if settings.update_nominal:
-            update = _update_nominal(meas, train, channels, base, info, *windows, settings)
+            update = update_from(base)
             base = update.params
         model_r = dataclasses.replace(model, base=base)
         cal, E, cmp = _nuisance_fit(model_r, meas, train, held, settings,
