@@ -556,6 +556,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
                 if starts_transient else "records are settled steady states")
     meas = order_features(measured, channels, transient_s)
     tick("measured order features")
+
     def update_from(start):
         return _update_nominal(meas, train, channels, start, info, transient_s, settle_s,
                                settings)
