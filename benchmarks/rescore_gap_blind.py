@@ -13,6 +13,11 @@ finished run, not an evaluation: thresholds chosen by looking at the evaluation 
 fitted on them, so a threshold change it suggests must be frozen and run on fresh seeds
 before its scores are claimed.
 
+``--without-readings`` decides the what-if side of a run made with ``bench_gap_blind.py
+--reading`` from the rotor as given's entries alone (those fitted in a reading carry
+``rotor_reading``): the same trials with and without the readings, the verdict's recheck
+of its discrete settings being the one part a log cannot replay.
+
 With several ``--commit`` (comma-separated) the runs' trials are pooled: meaningful only
 where those commits' searches give the same answers bit for bit (a later commit that
 changed nothing the search computes), which the caller must know. Each rate is also
@@ -208,6 +213,13 @@ def pair_statistics(recs, s):
     return rows
 
 
+def without_readings(rec):
+    """A logged trial with only the rotor as given's ranking entries (those fitted in an
+    alternative reading, ``rotor_reading``, left out): the run as it would have decided
+    without its readings."""
+    return {**rec, "ranking": [x for x in rec["ranking"] if "rotor_reading" not in x]}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--report", required=True,
@@ -218,6 +230,11 @@ def main(argv=None):
     ap.add_argument("--what-if", action="append", default=[], metavar="NAME=VALUE",
                     help="a changed threshold (repeatable)")
     ap.add_argument("--families", default="ross,second")
+    ap.add_argument("--without-readings", action="store_true",
+                    help="decide the what-if side from the rotor as given's entries alone "
+                         "(a run with bench_gap_blind --reading: its entries fitted in a "
+                         "reading carry it), so the two sides are the run with and "
+                         "without its readings")
     ap.add_argument("--pairs", action="store_true",
                     help="also list every pair verdict (under the what-if thresholds) with "
                     "what the search knew when it chose it (pair_statistics)")
@@ -241,15 +258,17 @@ def main(argv=None):
         ap.error(f"no logged evaluation trials of commit {args.commit!r} in {RESULTS}")
     rows, changed, counted = [], [], []
     for fam, recs in evals.items():
-        for label, s in (("frozen", frozen), ("what-if", other)):
-            sc = score(recs, s)
+        theirs = [without_readings(r) for r in recs] if args.without_readings else recs
+        for label, s, rs in (("frozen", frozen, recs), ("what-if", other, theirs)):
+            sc = score(rs, s)
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
-            if label == "frozen" or changes:  # counts to pool runs by, under either
+            if label == "frozen" or changes or args.without_readings:
+                # counts to pool runs by, under either
                 counted += [[fam, f"{key}{'' if label == 'frozen' else ' (what-if)'}",
                              f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"]
                             for key, k, n, lo, hi in intervals(sc)]
-        for r in recs:
-            a, b = verdict(r, frozen)[0], verdict(r, other)[0]
+        for r, t in zip(recs, theirs, strict=True):
+            a, b = verdict(r, frozen)[0], verdict(t, other)[0]
             if a != b:
                 changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
                                 json.dumps(a), json.dumps(b)])
@@ -260,7 +279,9 @@ def main(argv=None):
             sc = score(recs, frozen, rule)
             counted += [[fam, f"{key} ({name})", f"{k}/{n}", f"{sc[key]:.2f}",
                          f"{lo:.2f}-{hi:.2f}"] for key, k, n, lo, hi in intervals(sc)]
-    print("what-if:", ", ".join(f"{k}={v}" for k, v in changes.items()) or "(nothing)")
+    print("what-if:", ", ".join([*(f"{k}={v}" for k, v in changes.items()),
+                                 *(["without the readings"] if args.without_readings else [])])
+          or "(nothing)")
     table(rows, ["family", "thresholds", "trials", *COLUMNS])
     print()
     table(counted, ["family", "rate (frozen unless said)", "k/n", "rate",

@@ -577,3 +577,20 @@ def test_the_51000_run_decided_by_the_package_rule_names_one_more_right():
     after = {fam: _right_in_library(recs, now) for fam, recs in evals.items()}
     assert after == {"ross": before["ross"] + 1, "second": before["second"]}
     assert blind.score(evals["ross"], now)["top1"] == pytest.approx(23 / 26)
+
+
+def test_a_run_with_readings_is_decided_without_them_from_its_own_log():
+    """``rescore_gap_blind --without-readings`` decides a run made with ``--reading``
+    from the rotor as given's entries alone: the reading's fit, best in the log, is left
+    out and the rotor as given's best (failing the breadth check) is what is left."""
+    import rescore_gap_blind as rescore
+
+    rec = _record("looseness", [{"name": "looseness"}],
+                  [("looseness", 0.89, 0.35, 0.2, {}), ("looseness", 0.70, 0.15, 0.6, {}),
+                   ([], 0.0, 0.0, 2.0, {})], e0=2.0)
+    rec["ranking"][0]["rotor_reading"] = rec["ranking"][2]["rotor_reading"] = "tilt"
+    assert blind.verdict(rec, S)[0] == "looseness"
+    plain = rescore.without_readings(rec)
+    assert [r["shrink"] for r in plain["ranking"]] == [0.70]
+    assert blind.verdict(plain, S)[0] == "unexplained"
+    assert rec["ranking"][0]["rotor_reading"] == "tilt"  # the log itself is unchanged
