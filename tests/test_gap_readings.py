@@ -49,6 +49,9 @@ def test_the_report_names_the_reading_a_fit_was_made_in():
            "rotor_readings": [{"label": "tilt", "heldout_gap_alone": 41.25}]}
     text = _reading_text(doc)
     assert "'tilt' (tilt_share_O = 1)" in text and "41.25" in text
+    assert "own nominal update" not in text
+    doc["rotor_readings"][0]["nominal_update"] = {"updates": ["k2: -25.0 % +- 10.2 %"]}
+    assert "the reading's own nominal update: k2: -25.0 % +- 10.2 %." in _reading_text(doc)
     assert _reading_text({}) == ""
 
 

@@ -147,13 +147,17 @@ def _reading_text(doc) -> str:
     reading = doc.get("rotor_reading")
     if not reading:
         return ""
-    alone = next((r["heldout_gap_alone"] for r in doc.get("rotor_readings", [])
-                  if r["label"] == reading["label"]), None)
+    entry = next((r for r in doc.get("rotor_readings", [])
+                  if r["label"] == reading["label"]), {})
+    alone = entry.get("heldout_gap_alone")
+    updates = (entry.get("nominal_update") or {}).get("updates") or []
     return (f" Fitted in the rotor's reading {reading['label']!r} "
             f"({_changes_text(reading['changes'])}), chosen on the held-out speeds over "
             "the rotor as given: model error, not part of the effect"
-            + (f" (the reading alone leaves a held-out excess of {alone:.4g})."
-               if isinstance(alone, (int, float)) else "."))
+            + (f" (the reading alone leaves a held-out excess of {alone:.4g})"
+               if isinstance(alone, (int, float)) else "")
+            + (f"; the reading's own nominal update: {'; '.join(updates)}." if updates
+               else "."))
 
 
 def _model_error_text(error) -> str:
