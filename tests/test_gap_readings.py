@@ -56,7 +56,7 @@ def test_the_report_names_the_reading_a_fit_was_made_in():
 
 
 @pytest.mark.slow
-def test_a_reading_that_changes_nothing_fits_what_the_rotor_as_given_fits():
+def test_a_reading_that_changes_nothing_fits_what_the_rotor_as_given_fits(tmp_path):
     """The readings are compared on the rotor as given's features and tolerance: a
     reading equal to that rotor repeats its update, its nuisance-only model and its
     contenders' fits exactly, and decides as it does."""
@@ -79,3 +79,11 @@ def test_a_reading_that_changes_nothing_fits_what_the_rotor_as_given_fits():
     assert mine[1]["shrink"] == pytest.approx(0.0, abs=1e-12)
     assert mine[0]["heldout_gap_after"] == pytest.approx(given[0]["heldout_gap_after"])
     assert d["verdict"] == "runout"
+    # the report's ranking names the reading each fit was made in
+    from sknarx.gap.report import write_gap_outputs
+
+    doc = write_gap_outputs(d, tmp_path, "sknarx gap ...")
+    html = (tmp_path / "report.html").read_text()
+    assert "runout (in reading &#x27;as given&#x27;)" in html
+    assert "rotor reading &#x27;as given&#x27; alone" in html
+    assert doc["rotor_readings"][0]["label"] == "as given"
