@@ -18,7 +18,7 @@ SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settl
                  "update_nominal", "update_max_nfev", "update_spread", "seed",
                  "warm_lead_s", "n_probe", "jacobian_refresh", "settled_sigma",
                  "step_factor", "probes_per_parameter", "pair_probes_per_parameter",
-                 "pair_short_starts")
+                 "pair_short_starts", "reading_contenders")
 
 
 @dataclass(frozen=True)
