@@ -1,7 +1,7 @@
 """Alternative readings of the nominal rotor as a discrete setting: what they change.
 
 Run: ``python benchmarks/bench_gap_readings.py [--trials second:looseness:51058,...]
-[--reading tilt_share_O=1]`` (writes ``benchmarks/results/bench_gap_readings.json``;
+[--reading tilt:tilt_share_O=1]`` (writes ``benchmarks/results/bench_gap_readings.json``;
 each trial is appended to ``results/bench_gap_readings.jsonl`` first, so a stopped run
 resumes). Each trial (``FAMILY:KIND:SEED``, ``KIND`` an effect of the blind benchmark's
 draws or ``none`` for an effect-free one, drawn by ``plants.families``) is diagnosed
@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
-from bench_gap_blind import code_hash  # noqa: E402
+from bench_gap_blind import code_hash, parse_readings  # noqa: E402
 from plants.families import FAMILIES, make_family_trial  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -89,20 +89,11 @@ def main():
     ap.add_argument("--trials", default=",".join(DEFAULT_TRIALS),
                     help="FAMILY:KIND:SEED items, comma-separated (KIND 'none': "
                          "effect-free)")
-    ap.add_argument("--reading", default="tilt_share_O=1",
-                    help="the alternative reading, PARAMETER=VALUE[,...] "
-                         "(RotorParameters fields)")
+    ap.add_argument("--reading", default="tilt:tilt_share_O=1",
+                    help="the alternative reading, LABEL:PARAMETER=VALUE[,...] "
+                         "(RotorParameters fields), as bench_gap_blind.py takes it")
     args = ap.parse_args()
-    changes = {}
-    for item in args.reading.split(","):
-        key, sep, value = item.partition("=")
-        try:
-            changes[key.strip()] = float(value)
-        except ValueError:
-            ap.error(f"--reading: {item!r} is not PARAMETER=NUMBER")
-        if not sep:
-            ap.error(f"--reading: {item!r} is not PARAMETER=NUMBER")
-    readings = {args.reading: changes}
+    readings = parse_readings(ap, [args.reading])
     items = []
     for item in args.trials.split(","):
         family, kind, seed = (item.split(":") + ["", "", ""])[:3]
