@@ -16,6 +16,9 @@ from sknarx.gap.report import _candidate_label, _reading_text
         ({"tilt": {"tilt_shar_O": 1.0}}, r"unknown rotor parameter\(s\) \['tilt_shar_O'\]"),
         ({"tilt": {"tilt_share_O": "one"}}, r"sets \['tilt_share_O'\] to a non-number"),
         ({"tilt": {"tilt_share_O": True}}, "non-number"),
+        # the rotor's own validation, before any fit
+        ({"tilt": {"tilt_share_O": 2.0}}, r"Reading 'tilt' is not a rotor: .*between 0 and 1"),
+        ({"soft": {"k1": -1.0}}, r"Reading 'soft' is not a rotor: .*positive"),
     ],
 )
 def test_a_malformed_reading_is_named_with_what_is_wrong(readings, match):

@@ -526,7 +526,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     # measured, one evaluation of 10 speeds 50 ms with one BLAS thread, 100 ms with two
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(measured, base, channels, candidates, settings, progress,
-                         exhaustive, check_readings(readings))
+                         exhaustive, check_readings(readings, base))
 
 
 def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive,

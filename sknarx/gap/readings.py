@@ -15,8 +15,8 @@ reported as such; a reading alone (no effect) that explains the gap is a ``no-ga
 verdict with that model error.
 
 Every fit is compared against the same measured features and the same model-form
-tolerance (the first reading's, the nominal rotor as given): the held-out excesses of
-two readings are then on one scale, as two stations' are.
+tolerance (the nominal rotor as given's): the held-out excesses of two readings are
+then on one scale, as two stations' are.
 """
 
 from __future__ import annotations
@@ -29,10 +29,11 @@ from ..rotor import RotorParameters
 __all__ = ["check_readings", "reading_contenders"]
 
 
-def check_readings(readings) -> dict[str, dict]:
-    """``readings`` as ``{label: {field: value}}``, checked: each label a non-empty
-    string, each change a :class:`~sknarx.rotor.RotorParameters` field set to a number.
-    None or empty: no alternative reading."""
+def check_readings(readings, base: RotorParameters | None = None) -> dict[str, dict]:
+    """``readings`` as ``{label: {field: value}}``, checked before any work: each label a
+    non-empty string, each change a :class:`~sknarx.rotor.RotorParameters` field set to a
+    number that makes ``base`` (the paper's rotor by default) a physical rotor (its own
+    validation). None or empty: no alternative reading."""
     if not readings:
         return {}
     if not isinstance(readings, Mapping):
@@ -58,6 +59,10 @@ def check_readings(readings) -> dict[str, dict]:
             raise ValueError(f"Reading {label!r} sets {bad} to a non-number; give each "
                              "parameter its value in SI units.")
         out[label] = {k: float(v) for k, v in changes.items()}
+        try:
+            (base or RotorParameters()).replace(**out[label])
+        except ValueError as exc:
+            raise ValueError(f"Reading {label!r} is not a rotor: {exc}") from exc
     return out
 
 
