@@ -1,27 +1,31 @@
-"""Cost of one gap diagnosis of a 6-channel, 19-speed sweep against the whole library,
-with nominal updating, on sweeps from each plant family.
+"""Cost of one gap diagnosis of a 6-channel, 19-speed sweep against the whole library, with
+nominal updating, on sweeps from each plant family.
 
 Run: ``python benchmarks/bench_gap_cost.py [--families own,second,ross] [--repeat N]
 [--kinds crack,none] [--seeds 21,22] [--peer-kinds crack] [--peer-families own]
-[--plant-retries 3] [--peer-settings warm_lead_s=None]``
-(writes ``benchmarks/results/bench_gap_cost.json``, with each run's seed and phases:
-updating, nuisances, single candidates, the lead continued, pairs). A plant that fails
-on a trial's seed (ROSS's Newton iteration on a deep crack) is drawn again 100 seeds on,
-so every family has every kind of sweep; the failures are listed. Target (issue #13): at
-most 3 minutes on this 2-core machine. The peer, run side by side on the
-``--peer-kinds`` sweeps of the ``--peer-families``, is the same diagnosis with the
-``--peer-settings`` changed: by default every calibration evaluation settled from rest
-(``warm_lead_s=None``, the code before the warm start); ``n_probe=64`` times the
-search before its probes were doubled. The table quotes its time, verdict and the
-ratio. The numba kernels are compiled once per process; the first-call compile time is
-reported separately. The machine's speed is timed before and after the runs
-(``_common.machine_reference``: bench_simulator's ``solve_ivp`` peer, whose code has
-not changed in substance) and each time is also quoted at the speed of the machine of
-``results/bench_simulator_2463907.json``, on which the target was first met (the
-factor is in the table's header and the JSON). Stop other jobs first: on a
-shared machine the figure is only as good as the idle cores. The sweeps are the blind
-benchmark's trials (``plants.families``) with 19 speed steps instead of 10, channels
-``xO1 yO1 xA yA xB yB``.
+[--plant-retries 3] [--peer-settings warm_lead_s=None] [--reading LABEL:PARAM=VALUE]
+[--peer-without-readings]`` (writes ``benchmarks/results/bench_gap_cost.json``, with
+each run's seed and phases: updating, nuisances, single candidates, the lead continued,
+pairs). A plant that fails on a trial's seed (ROSS's Newton iteration on a deep crack)
+is drawn again 100 seeds on, so every family has every kind of sweep; the failures are
+listed. Target (issue #13): at most 3 minutes on this 2-core machine. The peer, run side
+by side on the ``--peer-kinds`` sweeps of the ``--peer-families``, is the same diagnosis
+with the ``--peer-settings`` changed: by default every calibration evaluation settled
+from rest (``warm_lead_s=None``, the code before the warm start); ``n_probe=64`` times
+the search before its probes were doubled. The table quotes its time, verdict and the
+ratio. ``--reading`` (repeatable, as ``bench_gap_blind.py --reading``) diagnoses every
+sweep with that alternative reading of the rotor too (diagnose's ``readings``); the peer
+gets the same readings unless ``--peer-without-readings``, which makes the peer the
+diagnosis without them (with ``--peer-settings ""``: the package's defaults), so the
+readings' cost is measured side by side. The numba kernels are compiled once per
+process; the first-call compile time is reported separately. The machine's speed is
+timed before and after the runs (``_common.machine_reference``: bench_simulator's
+``solve_ivp`` peer, whose code has not changed in substance) and each time is also
+quoted at the speed of the machine of ``results/bench_simulator_2463907.json``, on which
+the target was first met (the factor is in the table's header and the JSON). Stop other
+jobs first: on a shared machine the figure is only as good as the idle cores. The sweeps
+are the blind benchmark's trials (``plants.families``) with 19 speed steps instead of
+10, channels ``xO1 yO1 xA yA xB yB``.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from _common import (  # noqa: E402
     time_reference,
     write_json,
 )
+from bench_gap_blind import parse_readings  # noqa: E402
 from plants import families  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings, diagnose  # noqa: E402
@@ -73,7 +78,14 @@ def main():
                     help="the peer's DiagnosisSettings fields that differ from the "
                          "package's, as field=value pairs (Python literals), "
                          "comma-separated")
+    ap.add_argument("--reading", action="append", default=[], metavar="LABEL:PARAM=VALUE",
+                    help="an alternative reading of the rotor every sweep is also "
+                         "diagnosed in (repeatable), e.g. 'tilt:tilt_share_O=1'")
+    ap.add_argument("--peer-without-readings", action="store_true",
+                    help="the peer diagnoses without the --reading readings")
     args = ap.parse_args()
+    readings = parse_readings(ap, args.reading)
+    peer_readings = None if args.peer_without_readings else readings
     peer_settings = setting_overrides(
         [args.peer_settings], [f.name for f in dataclasses.fields(DiagnosisSettings)], ap,
         "--peer-settings", "n_probe=64")
@@ -100,7 +112,7 @@ def main():
     peer_kinds = [k for k in args.peer_kinds.split(",") if k]
     peer_config = DiagnosisSettings(**peer_settings)
 
-    def timed(measured, settings):
+    def timed(measured, settings, readings):
         """Median-ready wall times of ``repeat`` runs, and the last run's phases (s): where
         the time goes (updating, nuisances, single candidates, the lead continued, pairs)."""
         times, d, phases = [], None, {}
@@ -109,7 +121,7 @@ def main():
             marks = []
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                d = diagnose(measured, settings=settings,
+                d = diagnose(measured, settings=settings, readings=readings,
                              progress=lambda msg, m=marks: m.append((msg, time.perf_counter())))
             times.append(time.perf_counter() - t)
             last = t
@@ -135,15 +147,15 @@ def main():
             if measured is None:
                 results.append({"family": fam, "truth": k, "skipped": failures})
                 continue
-            d, times, phases = timed(measured, None)
+            d, times, phases = timed(measured, None, readings)
             dt = float(np.median(times))
             row = {"family": fam, "truth": truth["kind"], "seed": seed,
                    "plant_failures": failures, "verdict": d["verdict"],
                    "seconds": dt, "runs_s": times, "shrink": d["shrink"],
-                   "phases_s": phases}
+                   "phases_s": phases, "rotor_reading": d.document.get("rotor_reading")}
             peer = "-"
             if k in peer_kinds and fam in args.peer_families.split(","):
-                dp, ptimes, pphases = timed(measured, peer_config)
+                dp, ptimes, pphases = timed(measured, peer_config, peer_readings)
                 # the peer's phases too: a ratio alone does not say where it differs
                 row.update(peer_seconds=float(np.median(ptimes)), peer_runs_s=ptimes,
                            peer_verdict=dp["verdict"], peer_shrink=dp["shrink"],
@@ -175,6 +187,7 @@ def main():
                                           + ", ".join(f"{k}={v!r}"
                                                       for k, v in peer_settings.items()),
                                   "peer_settings": peer_settings,
+                                  "readings": readings, "peer_readings": peer_readings,
                                   "median_s": float(np.median([r["seconds"] for r in results
                                                                if "seconds" in r])),
                                   "max_s": float(max(max(r["runs_s"]) for r in results

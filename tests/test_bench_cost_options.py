@@ -82,3 +82,20 @@ def test_the_reference_is_timed_after_its_simulator_is_built(monkeypatch):
     monkeypatch.setattr(_common, "reference_workload", lambda: events.append("run"))
     _, runs_s, _ = _common.time_reference(2)
     assert events == ["built", "run", "run"] and len(runs_s) == 2
+
+
+def test_the_cost_benchmark_reads_readings_as_the_blind_run_does():
+    """``--reading`` is the blind run's syntax and parser (one for both), so the readings'
+    cost is measured on what the blind run diagnoses; a malformed one is a usage line."""
+    import subprocess
+
+    import bench_gap_blind
+
+    assert cost.parse_readings is bench_gap_blind.parse_readings
+    ap = argparse.ArgumentParser()
+    assert cost.parse_readings(ap, ["tilt:tilt_share_O=1"]) == {"tilt": {"tilt_share_O": 1.0}}
+    assert cost.parse_readings(ap, []) is None
+    run = subprocess.run([sys.executable, cost.__file__, "--reading", "tilt_share_O=1"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2
+    assert "--reading" in run.stderr and "Traceback" not in run.stderr
