@@ -594,3 +594,22 @@ def test_a_run_with_readings_is_decided_without_them_from_its_own_log():
     assert [r["shrink"] for r in plain["ranking"]] == [0.70]
     assert blind.verdict(plain, S)[0] == "unexplained"
     assert rec["ranking"][0]["rotor_reading"] == "tilt"  # the log itself is unchanged
+
+
+def test_the_55000_run_decided_without_its_reading_changes_one_verdict_and_names_no_fewer():
+    """The 55000 run's frozen decision (docs/gap_validation.md, *Its score*): decided
+    again from the rotor as given's entries alone, its logs change one verdict, the
+    second plant's thermal bow 55039 (``clearance`` with the reading, ``unexplained``
+    without), and the same number of trials is named right on each plant."""
+    import rescore_gap_blind as rescore
+
+    ran, evals = _logged_run("results/bench_gap_blind_55000_ae9aa08.json", "ae9aa08")
+    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
+    plain = {fam: [rescore.without_readings(r) for r in recs] for fam, recs in evals.items()}
+    changed = {(fam, r["seed"], json.dumps(blind.verdict(p, ran)[0]))
+               for fam in evals for r, p in zip(evals[fam], plain[fam], strict=True)
+               if blind.verdict(r, ran)[0] != blind.verdict(p, ran)[0]}
+    assert changed == {("second", 55039, '"unexplained"')}
+    right = {fam: _right_in_library(recs, ran) for fam, recs in evals.items()}
+    assert right == {fam: _right_in_library(recs, ran) for fam, recs in plain.items()}
+    assert blind.score(plain["second"], ran)["unexplained_out_of_library"] == pytest.approx(12 / 13)
