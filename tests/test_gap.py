@@ -692,6 +692,11 @@ def test_a_pair_of_rival_readings_gives_way_to_the_better_of_them():
     partner = _entry(["crack"], 20000.0, 0.5, 0.1)  # alone removes half: no rival
     assert decide(50.0, [rub, partner, pair], s, 100)["effect"] == ["rub", "crack"]
     assert decide(50.0, [rub, pair], s, 100)["effect"] == ["rub", "crack"]  # not fitted
+    # fitted alone twice (on the rotor as given and in a reading, best first): the
+    # better fit is what the member removes alone, whichever entry comes last
+    crack_in_reading = _entry(["crack"], 30000.0, 0.4, 0.1)
+    assert rivals(pair, [rub, crack, crack_in_reading], 0.8)
+    assert decide(50.0, [rub, crack, pair, crack_in_reading], s, 100)["effect"] == "rub"
 
 
 def test_a_pair_set_aside_as_rivals_is_stated_beside_the_verdict():

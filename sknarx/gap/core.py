@@ -274,8 +274,15 @@ def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | Non
 
 def shrinks_alone(ranking: list) -> dict[str, float]:
     """The share of the held-out gap each effect fitted alone removes (its single entry
-    in ``ranking``), by name."""
-    return {effect_names(r)[0]: r["shrink"] for r in ranking if len(effect_names(r)) == 1}
+    in ``ranking``), by name. An effect fitted alone more than once (with rotor
+    readings: on the rotor as given and in a reading) counts its best fit: what it can
+    remove alone."""
+    alone: dict[str, float] = {}
+    for r in ranking:
+        names = effect_names(r)
+        if len(names) == 1:
+            alone[names[0]] = max(alone.get(names[0], -np.inf), r["shrink"])
+    return alone
 
 
 def rivals(pair: dict, singles: list, share: float | None) -> bool:
