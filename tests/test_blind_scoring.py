@@ -613,3 +613,21 @@ def test_the_55000_run_decided_without_its_reading_changes_one_verdict_and_names
     right = {fam: _right_in_library(recs, ran) for fam, recs in evals.items()}
     assert right == {fam: _right_in_library(recs, ran) for fam, recs in plain.items()}
     assert blind.score(plain["second"], ran)["unexplained_out_of_library"] == pytest.approx(12 / 13)
+
+
+def test_the_57000_run_is_the_package_rule_and_its_logs_give_its_report():
+    """The 57000 run (docs/gap_validation.md, *Its score*), a replication of the package's
+    rule: its frozen thresholds are the package's defaults, its logs give the report's
+    scores (checked by :func:`_logged_run`) and trial counts, and the stated misses are
+    the logs' own: ROSS's cracks 57008 (with a partner) and 57053 (``unexplained``), the
+    second plant's loose joints 57010 and 57042 ``unexplained``."""
+    ran, evals = _logged_run("results/bench_gap_blind_57000_f917659.json", "f917659")
+    _assert_decided_as(ran, DiagnosisSettings(), but=())
+    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 65, "second": 68}
+    verdicts = {(fam, r["seed"]): blind.verdict(r, ran)[0]
+                for fam, recs in evals.items() for r in recs}
+    assert verdicts[("ross", 57008)] == ["crack", "misalignment"]
+    assert verdicts[("ross", 57053)] == "unexplained"
+    assert verdicts[("second", 57010)] == verdicts[("second", 57042)] == "unexplained"
+    assert blind.score(evals["ross"], ran)["top1"] == pytest.approx(24 / 28)
+    assert blind.score(evals["second"], ran)["unexplained_out_of_library"] == pytest.approx(11 / 13)
