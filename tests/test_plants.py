@@ -230,6 +230,39 @@ def test_ross_crack_as_written_drops_the_coupling_the_rotated_form_keeps():
         RossPlant(PaperRotorROSS(faults=crack, crack_form="skewed"))
 
 
+def test_ross_rub_friction_as_written_keeps_one_direction_wherever_the_contact_is():
+    """ROSS 2.3's ``Rubbing`` (the ROSS family's rub, docs/upstream_ross.md): its friction
+    is ``mu (-|F_x|, +|F_y|)`` of the contact force whatever the contact angle, so where
+    the contact is on the x axis it acts along the radius, where a Coulomb friction would
+    act along the tangent against the sliding."""
+    pytest.importorskip("ross")
+    from plants.ross_paper_rotor import PaperRotorROSS, RossPlant
+
+    mu, k, clearance, radius, whirl = 0.15, 3e6, 5e-4, 1e-3, 200.0  # -, N/m, m, m, rad/s
+
+    def rub(friction):
+        faults = {"rub": {"at": "O1", "clearance": clearance, "stiffness": k,
+                          "friction": friction}}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return RossPlant(PaperRotorROSS(faults=faults)).faults["rub"]
+
+    with_mu, without = rub(mu), rub(0.0)
+    normal = k * (radius - clearance)
+    for phi in np.linspace(0.0, 2 * np.pi, 16, endpoint=False):
+        radial = np.array([np.cos(phi), np.sin(phi)])
+        tangent = np.array([-np.sin(phi), np.cos(phi)])
+        y, ydot = np.zeros(12), np.zeros(12)
+        y[:2], ydot[:2] = radius * radial, radius * whirl * tangent  # forward circular whirl
+        contact = without.compute_rubbing_force(y, ydot, whirl)[:2]
+        friction = with_mu.compute_rubbing_force(y, ydot, whirl)[:2] - contact
+        np.testing.assert_allclose(friction, mu * np.abs(contact) * [-1.0, 1.0], atol=1e-9)
+        if np.isclose(np.sin(phi), 0.0, atol=1e-12):
+            # on the x axis all of it is along the radius, none along the sliding
+            assert abs(friction @ tangent) < 1e-3 * mu * normal
+            assert abs(friction @ radial) == pytest.approx(mu * normal, rel=1e-3)
+
+
 @pytest.mark.slow
 def test_update_stays_physical_and_finds_where_the_second_plants_dampers_act():
     from sknarx.gap import DiagnosisSettings
