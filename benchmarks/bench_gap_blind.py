@@ -28,7 +28,9 @@ of the ranking), false alarms on effect-free trials, ``unexplained`` on out-of-l
 trials, shrink against the oracle (the plant itself with every withheld effect, no
 noise), the confusion matrix, and on effect-free trials the nominal updates found.
 Beside them, of every verdict that names an effect, the share that names it right
-(``names_right``): top-1 counts a wrong name and ``unexplained`` alike, a user does not.
+(``names_right``): top-1 counts a wrong name and ``unexplained`` alike, a user does not;
+and the share whose every named effect is one the trial holds (``names_present``: a pair
+named by one member counts, a partner it lacks does not).
 An effect is *detectable* when it moves the measurement by more than the noise floor
 (held-out excess per feature of the measurement against the same plant without it).
 The package's per-order floors (``order_floors_z2``) are refitted on the null trials
@@ -350,6 +352,19 @@ def right(rec, s, rule=None):
     return got in (truth_label(rec, s), truth_label(rec))
 
 
+def names_present(rec, s, rule=None):
+    """Whether every effect the verdict names is one the trial holds: a pair named by
+    one of its members counts (what is named is there, a second effect is missed); a
+    partner the trial lacks, a library effect named for an out-of-library one and any
+    name on an effect-free trial do not. Detectability does not enter: a named effect
+    that is there is there, however weak."""
+    got = verdict(rec, s, rule)[0]
+    kind = rec["kind"]
+    held = set() if kind == "none" or not rec["in_library"] else (
+        {kind} if isinstance(kind, str) else set(kind))
+    return ({got} if isinstance(got, str) else set(got)) <= held
+
+
 #: the discrete parameter that says where an effect is (a crack's station, a rub's disk,
 #: a misalignment's bearing end), named alike in the truth and in the fitted parameters
 PLACE = {"crack": "station", "rub": "at", "misalignment": "at"}
@@ -491,6 +506,7 @@ def score(recs, s, rule=None):
         "unexplained_out_of_library": rate(out, lambda r: verdict(r, s, rule)[0] == "unexplained"),
         "shrink_vs_oracle_median": float(np.median(ratios)) if ratios else float("nan"),
         "names_right": rate(named, lambda r: detectable(r, s) and right(r, s, rule)),
+        "names_present": rate(named, lambda r: names_present(r, s, rule)),
         "n_named": len(named),
         "n_detectable_singles": len(singles), "n_detectable_pairs": len(pairs),
         "n_pairs_with_a_hidden_member": sum(1 for r in lib if isinstance(r["kind"], list)

@@ -77,7 +77,10 @@ COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           # noise floor (bench_gap_blind.within_noise_of_library)
           "unexplained_out_of_library_beyond_library": "n_out_of_library_beyond_library",
           # secondary: of every verdict that names an effect, the right ones
-          "names_right": "n_named"}
+          "names_right": "n_named",
+          # secondary: of every verdict that names an effect, those whose every named
+          # effect the trial holds (a pair named by one member counts)
+          "names_present": "n_named"}
 COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 

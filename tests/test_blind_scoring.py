@@ -122,6 +122,34 @@ def test_effects_without_a_place_and_wrong_verdicts_are_not_placed():
     assert sc["top1"] == 0.5
 
 
+def test_a_named_effect_counts_as_present_when_the_trial_holds_it_and_only_then():
+    """``names_present``: one member of a pair named is present (not right), the truth
+    named with a partner it lacks is not, nor a library effect named for an
+    out-of-library one or an alarm on an effect-free trial; ``unexplained`` names
+    nothing and is not counted."""
+    crack = {"crack": {"station": "A-O1"}}
+    part = _record(["crack", "runout"], {**crack, "runout": {}},
+                   [("runout", 0.99, 0.8, 0.2, {})])
+    plus = _record("crack", crack, [(["crack", "misalignment"], 0.99, 0.8, 0.1,
+                                     [{"station": "A-O1"}, {"at": "A"}]),
+                                    ("crack", 0.9, 0.5, 0.6, {"station": "A-O1"})])
+    bow = {**_record("thermal-bow", {"thermal-bow": {}}, [("runout", 0.95, 0.6, 0.2, {})]),
+           "in_library": False}
+    alarm = _record("none", {}, [("runout", 0.95, 0.6, 0.2, {})])
+    right = _record("crack", crack, [("crack", 0.95, 0.6, 0.2, {"station": "A-O1"})])
+    missed = _record("crack", crack, [("crack", 0.97, 0.07, 5.3, {"station": "A-O1"})])
+    assert blind.verdict(plus, S)[0] == ["crack", "misalignment"]
+    assert blind.verdict(missed, S)[0] == "unexplained"
+    got = {name: blind.names_present(rec, S) for name, rec in
+           (("part", part), ("plus", plus), ("bow", bow), ("alarm", alarm), ("right", right))}
+    assert got == {"part": True, "plus": False, "bow": False, "alarm": False, "right": True}
+    assert not blind.right(part, S)
+    sc = blind.score([part, plus, bow, alarm, right, missed], S)
+    assert sc["n_named"] == 5
+    assert sc["names_present"] == pytest.approx(2 / 5)
+    assert sc["names_right"] == pytest.approx(1 / 5)
+
+
 def test_an_effect_the_update_followed_is_not_separable():
     # visible against the plant without it (effect gap 25) but within the floor after
     # the update (e0 0.16): counted visible, scored, and reported as followed
