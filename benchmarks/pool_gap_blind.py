@@ -15,6 +15,10 @@ each pooled rate. Beside the targets' rates it pools the two splits every report
   effect-free sweeps ``no-gap`` says ``no-gap`` here too) and the rest; top-1 on the rest;
   and ``top1_reach``, the top-1 that a diagnosis right on every separable single would
   score;
+* likewise detectable pairs one of whose members the update followed, and the rest; both
+  members in the top two on the rest; and ``pairs_in_top2_reach``, the rate with every
+  separable pair's members in the top two and the others as they were (a followed member
+  can still rank second, so they are not all misses as the followed singles are);
 * visible out-of-library trials that an in-library fit (or the update alone) matches
   within the noise floor (``within_noise_of_library``), and the rest; ``unexplained`` on
   the rest. On the first kind a rule that judges candidates by their fit can answer
@@ -50,6 +54,7 @@ RATES = {
     "top1": ("top1", "n_detectable_singles"),
     "top1_separable": ("top1_separable", "n_separable_singles"),
     "pairs_in_top2": ("pairs_in_top2", "n_detectable_pairs"),
+    "pairs_in_top2_separable": ("pairs_in_top2_separable", "n_separable_pairs"),
     "false_alarm": ("false_alarm", "n_effect_free"),
     "unexplained_out_of_library": ("unexplained_out_of_library", "n_out_of_library"),
     "unexplained_out_of_library_beyond_library": (
@@ -75,6 +80,9 @@ def counts(scores):
     sc = dict(scores)
     if "n_singles_followed_by_update" in sc:
         sc["n_separable_singles"] = sc["n_detectable_singles"] - sc["n_singles_followed_by_update"]
+    if "n_pairs_with_a_member_followed" in sc:
+        sc["n_separable_pairs"] = (sc["n_detectable_pairs"]
+                                   - sc["n_pairs_with_a_member_followed"])
     out = {}
     for name, (rate, n_key) in RATES.items():
         if n_key not in sc or rate not in sc:
@@ -99,6 +107,10 @@ def separable_misses(family_report):
     return out
 
 
+def _rate(k, n):
+    return {"k": k, "n": n, "rate": k / n if n else float("nan"), "interval": list(wilson(k, n))}
+
+
 def pool(runs, families):
     """Per family: each run's counts, the pooled counts with their intervals, the
     reach of top-1, and the separable misses by (truth, verdict)."""
@@ -115,20 +127,27 @@ def pool(runs, families):
                             **{k: list(v) for k, v in c.items()}})
             if "top1_separable" in c:  # the reach's denominator: runs with the split only
                 c["top1_with_split"] = c["top1"]
+            if "pairs_in_top2_separable" in c:
+                c["pairs_with_split"] = c["pairs_in_top2"]
             for k, (a, b) in c.items():
                 total[k][0] += a
                 total[k][1] += b
                 total[k][2] += 1
             misses.update(separable_misses(d))
-        reach = None
+        reach = pair_reach = None
         if "top1_separable" in total:
             n_sep, n_all = total["top1_separable"][1], total.pop("top1_with_split")[1]
-            reach = {"k": n_sep, "n": n_all, "rate": n_sep / n_all if n_all else float("nan"),
-                     "interval": list(wilson(n_sep, n_all))}
+            reach = _rate(n_sep, n_all)
+        if "pairs_in_top2_separable" in total:
+            k_sep, n_sep = total["pairs_in_top2_separable"][:2]
+            k_all, n_all = total.pop("pairs_with_split")[:2]
+            # every separable pair in the top two, the followed ones as they ranked
+            pair_reach = _rate(n_sep + (k_all - k_sep), n_all)
         pooled = {k: {"k": a, "n": b, "rate": a / b if b else float("nan"),
                       "interval": list(wilson(a, b)), "runs": r}
                   for k, (a, b, r) in total.items()}
         out[fam] = {"runs": per_run, "pooled": pooled, "top1_reach": reach,
+                    "pairs_in_top2_reach": pair_reach,
                     "separable_misses": [{"truth": t, "verdict": v, "n": n}
                                          for (t, v), n in misses.most_common()]}
     return out
@@ -158,6 +177,12 @@ def main(argv=None):
                          f"{r['k']}/{r['n']}", f"{r['rate']:.3f}",
                          f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
                          d["pooled"]["top1_separable"]["runs"]])
+        if d["pairs_in_top2_reach"]:
+            r = d["pairs_in_top2_reach"]
+            rows.append([fam, "pairs_in_top2_reach (every separable pair in the top two)",
+                         f"{r['k']}/{r['n']}", f"{r['rate']:.3f}",
+                         f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
+                         d["pooled"]["pairs_in_top2_separable"]["runs"]])
     table(rows, ["family", "pooled", "k/n", "rate", "95 % interval (Wilson)", "runs"])
     print()
     table([[fam, m["truth"], m["verdict"], m["n"]] for fam, d in pooled.items()

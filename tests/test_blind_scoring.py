@@ -570,6 +570,11 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
                                  "misclassified": misses[:1]}}}
     new = {"families": {"ross": {"scores": _scores(0.8, 10, 1, 0.6, 5, 1.0, 3),
                                  "misclassified": misses}}}
+    # four pairs, two with a member the update followed: 2/4 in the top two, 1/2 of the
+    # separable ones (so one followed pair still ranked both members first)
+    new["families"]["ross"]["scores"] |= {
+        "n_detectable_pairs": 4, "pairs_in_top2": 0.5, "pairs_in_top2_separable": 0.5,
+        "n_pairs_with_a_member_followed": 2}
     (tmp_path / "bench_gap_blind_1000_abc1234.json").write_text(json.dumps(old))
     (tmp_path / "bench_gap_blind_3000_def5678.json").write_text(json.dumps(new))
     (tmp_path / "bench_gap_blind.json").write_text("{}")  # the latest run's copy: not pooled
@@ -592,6 +597,13 @@ def test_pooled_runs_sum_each_rate_and_leave_a_split_out_where_a_report_lacks_it
     assert (got["top1_reach"]["k"], got["top1_reach"]["n"]) == (15, 18)
     assert got["separable_misses"] == [{"truth": "rub", "verdict": "crack + rub", "n": 2}]
     assert p["top1"]["interval"] == list(rescore.wilson(14, 18))
+    # the pair split is pooled over the report that has it; the reach puts every
+    # separable pair in the top two and keeps the followed ones as they ranked
+    assert (p["pairs_in_top2"]["k"], p["pairs_in_top2"]["n"]) == (2 + 2, 2 + 4)
+    sep = p["pairs_in_top2_separable"]
+    assert (sep["k"], sep["n"], sep["runs"]) == (1, 2, 1)
+    assert (got["pairs_in_top2_reach"]["k"], got["pairs_in_top2_reach"]["n"]) == (2 + 1, 4)
+    assert wider["pairs_in_top2_reach"] == got["pairs_in_top2_reach"]
 
 
 def test_the_51000_run_decided_by_the_package_rule_names_one_more_right():
