@@ -171,18 +171,16 @@ def main(argv=None):
         for name, p in d["pooled"].items():
             rows.append([fam, name, f"{p['k']}/{p['n']}", f"{p['rate']:.3f}",
                          f"{p['interval'][0]:.2f}-{p['interval'][1]:.2f}", p["runs"]])
-        if d["top1_reach"]:
-            r = d["top1_reach"]
-            rows.append([fam, "top1_reach (every separable single right)",
-                         f"{r['k']}/{r['n']}", f"{r['rate']:.3f}",
-                         f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
-                         d["pooled"]["top1_separable"]["runs"]])
-        if d["pairs_in_top2_reach"]:
-            r = d["pairs_in_top2_reach"]
-            rows.append([fam, "pairs_in_top2_reach (every separable pair in the top two)",
-                         f"{r['k']}/{r['n']}", f"{r['rate']:.3f}",
-                         f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
-                         d["pooled"]["pairs_in_top2_separable"]["runs"]])
+        for reach, label, split in (
+                ("top1_reach", "every separable single right", "top1_separable"),
+                ("pairs_in_top2_reach", "every separable pair in the top two",
+                 "pairs_in_top2_separable")):
+            r = d[reach]
+            if r:
+                rows.append([fam, f"{reach} ({label})", f"{r['k']}/{r['n']}",
+                             f"{r['rate']:.3f}",
+                             f"{r['interval'][0]:.2f}-{r['interval'][1]:.2f}",
+                             d["pooled"][split]["runs"]])
     table(rows, ["family", "pooled", "k/n", "rate", "95 % interval (Wilson)", "runs"])
     print()
     table([[fam, m["truth"], m["verdict"], m["n"]] for fam, d in pooled.items()
