@@ -700,29 +700,39 @@ def test_the_package_rule_pooled_over_51000_59000_puts_ross_out_of_library_below
     reading), 57000 and 59000, summed per family. ROSS's out-of-library ``unexplained``
     is 48/69, its Wilson 95 % upper bound below the 0.80 target, and every one of its
     beyond-the-library draws is ``unexplained``; top-1 keeps 0.90 inside its interval."""
+    import frontier_gap_blind as frontier
     import rescore_gap_blind as rescore
 
-    runs = [("results/bench_gap_blind_51000_d2868af.json", "9fe186a,d2868af",
-             {"attribute_below_floor": True}, False),
-            ("results/bench_gap_blind_53000_3b0682d.json", "1540586,e4378f1", {}, False),
-            ("results/bench_gap_blind_55000_ae9aa08.json", "ae9aa08", {}, True),
-            ("results/bench_gap_blind_57000_f917659.json", "f917659", {}, False),
-            ("results/bench_gap_blind_59000_c1a3131.json", "c1a3131", {}, False)]
-    pooled = {}
-    for report, commits, what_if, plain in runs:
-        ran, evals = _logged_run(report, commits)
-        rule = replace(ran, **what_if)
-        for fam, recs in evals.items():
-            if plain:
-                recs = [rescore.without_readings(r) for r in recs]
-            for key, k, n, *_ in rescore.intervals(blind.score(recs, rule)):
-                got = pooled.setdefault((fam, key), [0, 0])
-                got[0] += k
-                got[1] += n
-    assert pooled[("ross", "unexplained_out_of_library")] == [48, 69]
+    for run in frontier.RUNS:  # each run's logs give its committed report first
+        _logged_run(run.report, run.commits)
+    pooled = frontier.pooled(frontier.decided_runs())
+    assert pooled["ross"]["unexplained_out_of_library"] == [48, 69]
     assert rescore.wilson(48, 69)[1] < 0.80
     for fam in ("ross", "second"):
-        k, n = pooled[(fam, "unexplained_out_of_library_beyond_library")]
+        k, n = pooled[fam]["unexplained_out_of_library_beyond_library"]
         assert k == n > 0
-    assert pooled[("ross", "top1")] == [117, 137] and pooled[("second", "top1")] == [137, 160]
+    assert pooled["ross"]["top1"] == [117, 137] and pooled["second"]["top1"] == [137, 160]
     assert rescore.wilson(117, 137)[1] > 0.90 and rescore.wilson(137, 160)[1] > 0.90
+
+
+def test_the_threshold_frontier_at_the_runs_own_point_is_the_package_rule():
+    """``frontier_gap_blind``: the grid point of the runs' own thresholds gives the
+    pooled package rule; a stricter shrink moves top-1 and out-of-library and leaves the
+    pairs in the top two (the ranking's) where they were; ``meets`` reads false alarms
+    as at most and the other rates as at least their targets."""
+    import frontier_gap_blind as frontier
+
+    decided = frontier.decided_runs()
+    own, strict = frontier.frontier(decided, (0.34,), (0.6, 0.9), (0.3,))
+    base = frontier.pooled(decided)
+    for fam in frontier.FAMILIES:
+        assert {r: own["families"][fam][r] for r in frontier.RATES} == {
+            r: base[fam][r] for r in frontier.RATES}
+        assert strict["families"][fam]["pairs_in_top2"] == base[fam]["pairs_in_top2"]
+        assert strict["families"][fam]["top1"][0] < base[fam]["top1"][0]
+        assert strict["families"][fam]["unexplained_out_of_library"][0] \
+            > base[fam]["unexplained_out_of_library"][0]
+        assert not own["families"][fam]["meets_moved"]
+    assert frontier.meets("false_alarm", 2, 50) and not frontier.meets("false_alarm", 3, 50)
+    assert frontier.meets("top1", 9, 10) and not frontier.meets("top1", 8, 10)
+    assert not frontier.meets("top1", 0, 0)
