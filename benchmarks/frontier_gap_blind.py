@@ -23,9 +23,12 @@ is printed with it.
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
+
+from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
@@ -99,21 +102,20 @@ def meets(rate, k, n):
     return _rate(k, n) <= TARGETS[rate] if rate == "false_alarm" else _rate(k, n) >= TARGETS[rate]
 
 
-def frontier(decided, floors, min_shrinks, min_log_shrinks):
-    """One row per grid point: the point, and per family each rate's ``[k, n]``,
-    whether every rate of :data:`RATES` meets its target (``meets_all``) and whether
-    the rates the thresholds move do (``meets_moved``)."""
+def frontier(decided, points):
+    """One row per point ``(floor, min_shrink, min_log_shrink)`` of ``points``: the
+    point, and per family each rate's ``[k, n]``, whether every rate of :data:`RATES`
+    meets its target (``meets_all``) and whether the rates the thresholds move do
+    (``meets_moved``)."""
     rows = []
-    for floor in floors:
-        for ms in min_shrinks:
-            for mls in min_log_shrinks:
-                point = {"no_gap_per_feature": floor, "min_shrink": ms, "min_log_shrink": mls}
-                got = pooled(decided, point)
-                rows.append({**point, "families": {
-                    fam: {**{rate: got[fam][rate] for rate in RATES},
-                          "meets_all": all(meets(rate, *got[fam][rate]) for rate in RATES),
-                          "meets_moved": all(meets(rate, *got[fam][rate]) for rate in MOVED)}
-                    for fam in got}})
+    for floor, ms, mls in points:
+        point = {"no_gap_per_feature": floor, "min_shrink": ms, "min_log_shrink": mls}
+        got = pooled(decided, point)
+        rows.append({**point, "families": {
+            fam: {**{rate: got[fam][rate] for rate in RATES},
+                  "meets_all": all(meets(rate, *got[fam][rate]) for rate in RATES),
+                  "meets_moved": all(meets(rate, *got[fam][rate]) for rate in MOVED)}
+            for fam in got}})
     return rows
 
 
@@ -140,8 +142,10 @@ def main(argv=None):
     ap.add_argument("--min-log-shrink", type=_floats, default=(0.1, 0.2, 0.3, 0.5),
                     help="held-out log shrinks a named effect needs (default 0.1,0.2,0.3,0.5)")
     args = ap.parse_args(argv)
+    print(f"loading the logs of {len(RUNS)} runs", file=sys.stderr)
     decided = decided_runs()
-    rows = frontier(decided, args.floor, args.min_shrink, args.min_log_shrink)
+    grid = list(itertools.product(args.floor, args.min_shrink, args.min_log_shrink))
+    rows = frontier(decided, tqdm(grid, desc="grid points", unit="point", file=sys.stderr))
 
     def cell(fam, row, rate):
         k, n = row["families"][fam][rate]

@@ -723,7 +723,7 @@ def test_the_threshold_frontier_at_the_runs_own_point_is_the_package_rule():
     import frontier_gap_blind as frontier
 
     decided = frontier.decided_runs()
-    own, strict = frontier.frontier(decided, (0.34,), (0.6, 0.9), (0.3,))
+    own, strict = frontier.frontier(decided, [(0.34, 0.6, 0.3), (0.34, 0.9, 0.3)])
     base = frontier.pooled(decided)
     for fam in frontier.FAMILIES:
         assert {r: own["families"][fam][r] for r in frontier.RATES} == {
