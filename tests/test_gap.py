@@ -731,6 +731,51 @@ def test_a_pair_set_aside_as_rivals_is_stated_beside_the_verdict():
     assert _rival_text({"verdict": "rub"}) == ""
 
 
+def test_an_unexplained_verdict_says_which_candidate_came_closest_and_what_it_missed():
+    """``unexplained`` carries ``closest``: the candidate the verdict rule judged (the
+    pair where it earns its place), the tests it failed and their thresholds, and the
+    report says it in a sentence: a shrink short of ``min_shrink``, a breadth short of
+    ``min_log_shrink`` (waived at the floor, so not listed there), or both. ``decide``
+    and ``closest`` apply the same tests (``shortfalls``), so an entry with nothing
+    short is named."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import closest, conclude, decide, shortfalls
+    from sknarx.gap.report import _closest_text
+
+    s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.6, min_log_shrink=0.3,
+                          pair_trigger=1.0, pair_gain=0.3, pair_rival_shrink=None,
+                          linear_form_gain=None)
+    cmp0 = pd.DataFrame({"speed": np.repeat(np.arange(10.0), 10), "excess": 5.0,
+                         "gap": 1e-6, "window": "steady", "channel": "xA", "feature": "1x"})
+    narrow = _entry(["rub"], 400.0, 0.87, 0.2)  # leaves 4 per feature
+    weak = _entry(["crack"], 1500.0, 0.5, 0.1)
+    assert decide(50.0, [narrow, weak], s, 100) is None
+    doc = conclude(None, [narrow, weak], cmp0, [], s, 100)
+    near = doc["closest"]
+    assert doc["verdict"] == "unexplained" and near["effect"] == "rub"
+    assert near["short_of"] == ["breadth"] and near["shrink"] == 0.87
+    assert (near["min_shrink"], near["min_log_shrink"]) == (0.6, 0.3)
+    text = _closest_text(doc)
+    assert text == (" The closest candidate, rub, removes 87 % of the held-out gap but "
+                    "only 20 % of its logarithm, where a named effect needs 30 %: it "
+                    "matches the largest features, not the many others.")
+    assert shortfalls(_entry(["rub"], 400.0, 0.5, 0.4), s, 100) == ["shrink"]
+    assert shortfalls(weak, s, 100) == ["shrink", "breadth"]
+    assert "needs 60 % and 30 %" in _closest_text(
+        {"closest": closest([weak], s, 100)})
+    # leaving no more than the floor waives the breadth test: only the shrink is short
+    flat = _entry(["rub"], 40.0, 0.55, 0.1)
+    assert shortfalls(flat, s, 100) == ["shrink"]
+    assert shortfalls(flat, s, 100, under=True) == ["shrink", "breadth"]
+    # the pair the rule prefers is the one judged
+    pair = _entry(["rub", "crack"], 250.0, 0.9, 0.25)
+    assert closest([narrow, weak, pair], s, 100)["effect"] == ["rub", "crack"]
+    named = _entry(["rub"], 100.0, 0.9, 0.5)
+    assert shortfalls(named, s, 100) == [] and decide(50.0, [named], s, 100) is named
+    assert _closest_text({"verdict": "rub"}) == ""
+    assert "closest" not in conclude(None, [], cmp0, [], s, 100)
+
+
 @given(st.lists(st.tuples(st.sampled_from(["rub", "crack", "runout", "clearance"]),
                           st.floats(1.0, 5000.0), st.floats(-1.0, 1.0)),
                 min_size=1, max_size=4, unique_by=lambda t: t[0]),

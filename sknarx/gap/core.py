@@ -35,11 +35,12 @@ from joblib import Parallel, delayed
 
 from .._progress import progress_bar
 
-__all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "conclude",
-           "decide", "effect_names", "log_shrink", "order_floors", "order_mean_z2",
-           "orders_over_floor",
+__all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "closest",
+           "conclude", "decide", "effect_names", "log_shrink", "order_floors",
+           "order_mean_z2", "orders_over_floor",
            "preferred", "public_ranking", "rank", "recheck_choice", "regions_after",
-           "run_parallel", "search", "setting_support", "shrink", "table_evidence"]
+           "run_parallel", "search", "setting_support", "shortfalls", "shrink",
+           "table_evidence"]
 
 logger = logging.getLogger(__name__)
 
@@ -364,12 +365,25 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     choice = preferred(ranking, settings, n_features)
     if choice is None:
         return none_named
-    left = choice["heldout_gap_after"] / max(n_features, 1)
+    return none_named if shortfalls(choice, settings, n_features, under) else choice
+
+
+def shortfalls(entry: dict, settings, n_features: int, under: bool = False) -> list[str]:
+    """The tests of :func:`decide` that the judged candidate ``entry`` fails:
+    ``'shrink'`` (it removes less than ``min_shrink`` of the held-out excess) and
+    ``'breadth'`` (less than ``min_log_shrink`` of its logarithm, the waiver at the
+    floor not applying); ``under``: the sweep was within the no-gap floor. Empty: the
+    candidate is named."""
+    left = entry["heldout_gap_after"] / max(n_features, 1)
     # under the floor every candidate leaves no more than it: the waiver would pass any
     waived = (settings.breadth_waived_at_floor and not under
               and left <= settings.no_gap_per_feature)
-    broad = choice["log_shrink"] >= settings.min_log_shrink or waived
-    return choice if choice["shrink"] >= settings.min_shrink and broad else none_named
+    failed = []
+    if entry["shrink"] < settings.min_shrink:
+        failed.append("shrink")
+    if entry["log_shrink"] < settings.min_log_shrink and not waived:
+        failed.append("breadth")
+    return failed
 
 
 class FrontEnd:
@@ -559,21 +573,27 @@ def recheck_choice(front: FrontEnd, choice, ranked: list, E0: float, cmp0: pd.Da
     return decide(e0, ranked, settings, n_features, orders_over), ranked
 
 
-def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -> dict:
+def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings,
+             n_features: int | None = None) -> dict:
     """The document's verdict entries from :func:`decide`'s ``choice``: the verdict, the
     shrink of the held-out gap (for ``unexplained``, what the best candidate removed),
     and with a verdict its bootstrap band, the gap after and each region before and
     after; ``model_error`` where the chosen candidate carries one (the linear form of a
     member that was no effect, see :func:`search`) and ``setting_decided`` where it has
     discrete settings (see :func:`setting_support`); ``rival_pair`` where a pair would
-    have been named but for the rival test (:func:`rival_pair_set_aside`)."""
+    have been named but for the rival test (:func:`rival_pair_set_aside`); for
+    ``unexplained``, ``closest`` (:func:`closest`). ``n_features``: the held-out
+    features :func:`decide` was given (default: the rows of ``cmp0``)."""
     if choice == "no-gap":
         return {"verdict": "no-gap", "shrink": 0.0}
-    aside = rival_pair_set_aside(ranking, settings, max(len(cmp0), 1))
+    n_features = max(len(cmp0) if n_features is None else n_features, 1)
+    aside = rival_pair_set_aside(ranking, settings, n_features)
     rival = {"rival_pair": aside} if aside is not None else {}
     if choice is None:
+        near = closest(ranking, settings, n_features)
         return {"verdict": "unexplained",
-                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0, **rival}
+                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0, **rival,
+                **({"closest": near} if near is not None else {})}
     cmp = choice["_cmp"]
     gap_after = {"heldout_excess": choice["heldout_gap_after"],
                  "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))}
@@ -589,6 +609,21 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings) -
             "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
             "gap_after": gap_after, "regions_after": regions_after(where, cmp, cmp0),
             **extra}
+
+
+def closest(ranking: list, settings, n_features: int) -> dict | None:
+    """For an ``unexplained`` verdict, the candidate the verdict judged
+    (:func:`preferred`) and why it was not named: its ``effect``, ``shrink``,
+    ``log_shrink`` and ``heldout_gap_after``, the tests it fails (``short_of``, see
+    :func:`shortfalls`) and the thresholds they hold it to. None without a candidate."""
+    judged = preferred(ranking, settings, n_features)
+    if judged is None:
+        return None
+    return {"effect": judged["effect"], "shrink": float(judged["shrink"]),
+            "log_shrink": float(judged["log_shrink"]),
+            "heldout_gap_after": float(judged["heldout_gap_after"]),
+            "short_of": shortfalls(judged, settings, n_features),
+            "min_shrink": settings.min_shrink, "min_log_shrink": settings.min_log_shrink}
 
 
 def public_ranking(ranking: list) -> list[dict]:

@@ -655,7 +655,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
             choice, ranked = recheck_choice(_ByReading(fronts), choice, ranked, E0, cmp0,
                                             settings, n_features, e0, over)
         tick("verdict's other settings refitted from its fit")
-    doc.update(conclude(choice, ranked, cmp0, doc["where"], settings))
+    doc.update(conclude(choice, ranked, cmp0, doc["where"], settings, n_features))
     if isinstance(choice, dict):
         result.tables["after"] = choice["_cmp"]
         reading = choice.get("rotor_reading")

@@ -287,7 +287,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
             "no_gap_per_feature", "min_shrink", "min_log_shrink", "pair_trigger",
             "pair_gain", "pair_margin", "n_bootstrap", "seed")},
     }
-    doc.update(conclude(choice, ranked, cmp0, where, settings))
+    doc.update(conclude(choice, ranked, cmp0, where, settings, n_held))
     modes = _verdict_modes(rotor, best)
     doc["critical_speeds_rpm"] = sorted(m["rpm"] for m in modes)
     doc["modes"] = modes

@@ -219,6 +219,25 @@ def alike_text(verdict) -> str:
                    for n in names if n in EFFECTS and EFFECTS[n].alike)
 
 
+def _closest_text(doc) -> str:
+    """Why the candidate an ``unexplained`` verdict judged was not named
+    (``sknarx.gap.core.closest``), as a sentence."""
+    near = doc.get("closest")
+    if not near or not near["short_of"]:
+        return ""
+    lead = (f" The closest candidate, {_label(near['effect'])}, removes "
+            f"{100 * near['shrink']:.0f} % of the held-out gap")
+    need, log = 100 * near["min_shrink"], 100 * near["log_shrink"]
+    need_log = 100 * near["min_log_shrink"]
+    if near["short_of"] == ["shrink"]:
+        return f"{lead}, where a named effect needs {need:.0f} %."
+    if near["short_of"] == ["breadth"]:
+        return (f"{lead} but only {log:.0f} % of its logarithm, where a named effect needs "
+                f"{need_log:.0f} %: it matches the largest features, not the many others.")
+    return (f"{lead} and {log:.0f} % of its logarithm, where a named effect needs "
+            f"{need:.0f} % and {need_log:.0f} %.")
+
+
 def _rival_text(doc) -> str:
     """The verdict's note where the rival test set a pair aside
     (``sknarx.gap.core.rival_pair_set_aside``)."""
@@ -371,7 +390,7 @@ def _html(doc, figs, prov):
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
                     "a nominal model further from the rig than the nuisance scalars allow."
-                    + _orders_text(doc) + _rival_text(doc))
+                    + _closest_text(doc) + _orders_text(doc) + _rival_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
