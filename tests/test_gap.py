@@ -740,7 +740,7 @@ def test_an_unexplained_verdict_says_which_candidate_came_closest_and_what_it_mi
     short is named."""
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap.core import closest, conclude, decide, shortfalls
-    from sknarx.gap.report import _closest_text
+    from sknarx.gap.report import closest_text
 
     s = DiagnosisSettings(no_gap_per_feature=0.5, min_shrink=0.6, min_log_shrink=0.3,
                           pair_trigger=1.0, pair_gain=0.3, pair_rival_shrink=None,
@@ -755,13 +755,13 @@ def test_an_unexplained_verdict_says_which_candidate_came_closest_and_what_it_mi
     assert doc["verdict"] == "unexplained" and near["effect"] == "rub"
     assert near["short_of"] == ["breadth"] and near["shrink"] == 0.87
     assert (near["min_shrink"], near["min_log_shrink"]) == (0.6, 0.3)
-    text = _closest_text(doc)
+    text = closest_text(doc)
     assert text == (" The closest candidate, rub, removes 87 % of the held-out gap but "
                     "only 20 % of its logarithm, where a named effect needs 30 %: it "
                     "matches the largest features, not the many others.")
     assert shortfalls(_entry(["rub"], 400.0, 0.5, 0.4), s, 100) == ["shrink"]
     assert shortfalls(weak, s, 100) == ["shrink", "breadth"]
-    assert "needs 60 % and 30 %" in _closest_text(
+    assert "needs 60 % and 30 %" in closest_text(
         {"closest": closest([weak], s, 100)})
     # leaving no more than the floor waives the breadth test: only the shrink is short
     flat = _entry(["rub"], 40.0, 0.55, 0.1)
@@ -772,7 +772,7 @@ def test_an_unexplained_verdict_says_which_candidate_came_closest_and_what_it_mi
     assert closest([narrow, weak, pair], s, 100)["effect"] == ["rub", "crack"]
     named = _entry(["rub"], 100.0, 0.9, 0.5)
     assert shortfalls(named, s, 100) == [] and decide(50.0, [named], s, 100) is named
-    assert _closest_text({"verdict": "rub"}) == ""
+    assert closest_text({"verdict": "rub"}) == ""
     assert "closest" not in conclude(None, [], cmp0, [], s, 100)
 
 

@@ -12,7 +12,7 @@ import pandas as pd
 from .._report import figure, page, provenance, quantity, table, value_range
 from ..io import json_safe
 from ..plotting import plt, save
-from .report import alike_text
+from .report import alike_text, closest_text
 
 __all__ = ["figures", "html_report", "write_bode_outputs"]
 
@@ -145,9 +145,10 @@ def html_report(doc, figs):
     band = doc.get("shrink_band")
     band_text = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)" if band
                  else "")
-    # what a named effect cannot be told from is stated where the verdict is
+    # what a named effect cannot be told from, or what the closest candidate of an
+    # unexplained one missed, is stated where the verdict is
     alike = (alike_text(doc["verdict"]).strip()
-             if doc["verdict"] not in ("no-gap", "unexplained") else "")
+             if doc["verdict"] not in ("no-gap", "unexplained") else closest_text(doc).strip())
     body = f"""<h2>Verdict: {html.escape(v)} - {100 * doc['shrink']:.0f} % of the held-out gap
 removed{band_text}</h2>{f'<p>{html.escape(alike)}</p>' if alike else ''}
 <h2>Nominal calibration</h2><p>The described rotor's first critical speed is

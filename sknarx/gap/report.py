@@ -219,7 +219,7 @@ def alike_text(verdict) -> str:
                    for n in names if n in EFFECTS and EFFECTS[n].alike)
 
 
-def _closest_text(doc) -> str:
+def closest_text(doc) -> str:
     """Why the candidate an ``unexplained`` verdict judged was not named
     (``sknarx.gap.core.closest``), as a sentence."""
     near = doc.get("closest")
@@ -390,7 +390,7 @@ def _html(doc, figs, prov):
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
                     "a nominal model further from the rig than the nuisance scalars allow."
-                    + _closest_text(doc) + _orders_text(doc) + _rival_text(doc))
+                    + closest_text(doc) + _orders_text(doc) + _rival_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
