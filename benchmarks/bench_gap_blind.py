@@ -306,11 +306,17 @@ def orders_over(rec, s):
     return orders_over_floor({k: v["z2"] for k, v in by_kind.items()}, s)
 
 
+def logged_ranking(rec):
+    """A logged trial's ranking with each entry's held-out gap after under the core's
+    key (the log keeps it as ``E``)."""
+    return [{**r, "heldout_gap_after": r["E"]} for r in rec["ranking"]]
+
+
 def chosen(rec, s, rule=None):
     """The frozen rule's choice on a logged trial: ``'no-gap'``, None (unexplained) or
     the chosen ranking entry; with ``rule`` (:class:`NoiseReferencedShrink`), that
     rule's."""
-    ranking = [{**r, "heldout_gap_after": r["E"]} for r in rec["ranking"]]
+    ranking = logged_ranking(rec)
     if rule is not None:
         base = rec["E0"] - rule.noise_per_feature * rec["n_features"]
         ranking = [{**r, "shrink": (rec["E0"] - r["E"]) / base if base > 0
