@@ -131,13 +131,29 @@ def _gap(args) -> int:
             narx = narx_view_of(result, measured, base)
             progress("NARX view")
         doc = write_gap_outputs(result, out, _command_line(), narx)
-    print(f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
-          + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
-             if doc.get("model_error") else "")
-          + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
-             if doc.get("rotor_reading") else ""))
+    print(_verdict_line(doc))
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
     return 0
+
+
+def _verdict_line(doc) -> str:
+    """The one line ``sknarx gap`` prints for its verdict: the share removed, model
+    error where the verdict carries one, the rotor's reading, and for ``unexplained``
+    the closest candidate and the tests it missed (``diagnosis.json``'s ``closest``)."""
+    near = doc.get("closest") or {}
+    effect = near.get("effect")
+    name = " + ".join(effect) if isinstance(effect, list) else effect
+    missed = {"shrink": f"the shrink ({100 * near.get('min_shrink', 0):.0f} % needed)",
+              "breadth": f"the breadth ({100 * near.get('min_log_shrink', 0):.0f} % of the "
+                         "logarithm needed)"}
+    return (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
+            + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
+               if doc.get("model_error") else "")
+            + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
+               if doc.get("rotor_reading") else "")
+            + (f"; closest candidate {name}, short of "
+               + " and ".join(missed[k] for k in near["short_of"])
+               if near.get("short_of") else ""))
 
 
 def _unbalance(args) -> int:

@@ -92,3 +92,20 @@ def test_api_reference_is_generated_from_current_docstrings():
                  "sknarx.datasets.load_rk4_runup", "correlation_tests"):
         assert name in text
     assert "(undocumented)" not in text
+
+
+def test_the_gap_verdict_line_names_the_closest_candidate_of_an_unexplained_verdict():
+    """``sknarx gap``'s verdict line: as before for a named verdict; for ``unexplained``
+    it adds the closest candidate and each test it missed, with what that test needs."""
+    from sknarx.cli import _verdict_line
+
+    assert _verdict_line({"verdict": "rub", "shrink": 0.9}) == (
+        "verdict: rub; held-out gap removed: 90 %")
+    doc = {"verdict": "unexplained", "shrink": 0.87,
+           "closest": {"effect": ["rub", "crack"], "short_of": ["shrink", "breadth"],
+                       "min_shrink": 0.6, "min_log_shrink": 0.3}}
+    assert _verdict_line(doc) == (
+        "verdict: unexplained; held-out gap removed: 87 %; closest candidate rub + crack, "
+        "short of the shrink (60 % needed) and the breadth (30 % of the logarithm needed)")
+    doc["closest"]["short_of"] = []
+    assert _verdict_line(doc) == "verdict: unexplained; held-out gap removed: 87 %"
