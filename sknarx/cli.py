@@ -137,23 +137,18 @@ def _gap(args) -> int:
 
 
 def _verdict_line(doc) -> str:
-    """The one line ``sknarx gap`` prints for its verdict: the share removed, model
-    error where the verdict carries one, the rotor's reading, and for ``unexplained``
-    the closest candidate and the tests it missed (``diagnosis.json``'s ``closest``)."""
-    near = doc.get("closest") or {}
-    effect = near.get("effect")
-    name = " + ".join(effect) if isinstance(effect, list) else effect
-    missed = {"shrink": f"the shrink ({100 * near.get('min_shrink', 0):.0f} % needed)",
-              "breadth": f"the breadth ({100 * near.get('min_log_shrink', 0):.0f} % of the "
-                         "logarithm needed)"}
-    return (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
+    """What ``sknarx gap`` prints for its verdict: the share removed, model error where
+    the verdict carries one, the rotor's reading, and for ``unexplained`` the report's
+    sentence on the closest candidate (``diagnosis.json``'s ``closest``) below it."""
+    from .gap.report import closest_text
+
+    line = (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
             + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
                if doc.get("model_error") else "")
             + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
-               if doc.get("rotor_reading") else "")
-            + (f"; closest candidate {name}, short of "
-               + " and ".join(missed[k] for k in near["short_of"])
-               if near.get("short_of") else ""))
+               if doc.get("rotor_reading") else ""))
+    near = closest_text(doc).strip()
+    return f"{line}\n{near}" if near else line
 
 
 def _unbalance(args) -> int:

@@ -96,16 +96,18 @@ def test_api_reference_is_generated_from_current_docstrings():
 
 def test_the_gap_verdict_line_names_the_closest_candidate_of_an_unexplained_verdict():
     """``sknarx gap``'s verdict line: as before for a named verdict; for ``unexplained``
-    it adds the closest candidate and each test it missed, with what that test needs."""
+    the report's sentence on the closest candidate follows on a line of its own."""
     from sknarx.cli import _verdict_line
 
     assert _verdict_line({"verdict": "rub", "shrink": 0.9}) == (
         "verdict: rub; held-out gap removed: 90 %")
     doc = {"verdict": "unexplained", "shrink": 0.87,
            "closest": {"effect": ["rub", "crack"], "short_of": ["shrink", "breadth"],
+                       "shrink": 0.5, "log_shrink": 0.1,
                        "min_shrink": 0.6, "min_log_shrink": 0.3}}
     assert _verdict_line(doc) == (
-        "verdict: unexplained; held-out gap removed: 87 %; closest candidate rub + crack, "
-        "short of the shrink (60 % needed) and the breadth (30 % of the logarithm needed)")
+        "verdict: unexplained; held-out gap removed: 87 %\nThe closest candidate, rub + "
+        "crack, removes 50 % of the held-out gap and 10 % of its logarithm, where a named "
+        "effect needs 60 % and 30 %.")
     doc["closest"]["short_of"] = []
     assert _verdict_line(doc) == "verdict: unexplained; held-out gap removed: 87 %"
