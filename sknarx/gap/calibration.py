@@ -459,8 +459,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                            for k, x in zip(keys, points, strict=True)]
         probes.sort(key=lambda p: p[0])
         # each discrete setting gets its own leading starts: a wrong station's probes
-        # can all undercut the right one's before any local run (crack trial 5068: the
-        # O2-B probes lead, A-O1's fourth-best converges to 1/12 of their cost)
+        # can all undercut the right one's before any local run (seen on a crack at A-O1
+        # whose O2-B probes led, while A-O1's fourth-best converged to 1/12 of their cost)
         x0s = [(x, combo) for combo in combos
                for _, x, _ in [p for p in probes if p[2] is combo][:n_short]]
         if max_nfev == 0:  # probes only: the best probe, unpolished (no uncertainty)

@@ -24,8 +24,8 @@ search, ranking, verdict and shrink are the gap core's (:mod:`sknarx.gap.core`):
    (a breadth check, waived where it leaves no more than the no-gap floor: see
    :func:`sknarx.gap.core.decide`), else ``unexplained``.
 
-Thresholds are fixed on pilot trials of ``benchmarks/bench_gap_blind.py`` and
-then frozen (see ``DiagnosisSettings``).
+Thresholds are set on trials of ``benchmarks/bench_gap_blind.py`` and then frozen
+(see ``DiagnosisSettings``; docs/gap.md tables which trials set each).
 """
 
 from __future__ import annotations

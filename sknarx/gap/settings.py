@@ -1,10 +1,13 @@
 """Thresholds and search effort of the gap diagnosis.
 
 The no-gap threshold and the per-order floors are noise floors measured on effect-free
-trials; the other verdict thresholds were fitted on the own family's pilot trials of
-``benchmarks/bench_gap_blind.py``; all are frozen here (docs/gap_validation.md says
-which trials set each). The search-effort fields decide
-what is computed (the benchmark reuses a logged trial only if they match).
+trials; the shrink and pair thresholds were fitted on the own family's pilot trials
+of ``benchmarks/bench_gap_blind.py``, and four settings were chosen on the logged
+trials of the independent plants before fresh seeds scored them; all are frozen here.
+Which trials set each value and where it was then scored blind is a table in
+docs/gap.md (*Where the frozen settings come from*); the comments below say why each is
+there. The search-effort fields decide what is computed (the benchmark reuses a logged
+trial only if they match).
 """
 
 from __future__ import annotations
@@ -23,10 +26,10 @@ SEARCH_FIELDS = ("pair_trigger", "n_partners", "max_nfev", "transient_s", "settl
 
 @dataclass(frozen=True)
 class DiagnosisSettings:
-    """Frozen thresholds and search effort (fixed on pilot seeds, see the benchmark)."""
+    """Frozen thresholds and search effort (docs/gap.md: where each was set)."""
 
-    # the verdict thresholds are fitted by benchmarks/bench_gap_blind.py and frozen here;
-    # where each value came from (trials, seeds, quantiles) is in docs/gap_validation.md
+    # the verdict thresholds are fitted by benchmarks/bench_gap_blind.py and frozen here
+    # (docs/gap.md, *Where the frozen settings come from*)
     no_gap_per_feature: float = 0.340  # mean held-out excess per feature below which: no-gap
     min_shrink: float = 0.6  # a verdict must remove at least this share of the gap
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
@@ -36,11 +39,10 @@ class DiagnosisSettings:
     breadth_waived_at_floor: bool = True
     # a sweep under the floor (every order too) is still attributed to the candidate
     # that passes min_shrink and min_log_shrink of what is left (the breadth check not
-    # waived); False: under the floor is no-gap before any candidate. On since the 51000
-    # run met the rule frozen for it (one more right name, nothing falling): an effect
-    # the nominal update mostly followed still leaves a signature under the floor. It
-    # costs every effect-free sweep the candidate search, about ten times the diagnosis
-    # without it (docs/gap_validation.md, *The 51000 run* and *Cost history*)
+    # waived); False: under the floor is no-gap before any candidate. An effect the
+    # nominal update mostly followed still leaves a signature under the floor, and a
+    # candidate must still pass both shrinks of what is left to be named. It costs every
+    # effect-free sweep the candidate search, about ten times the diagnosis without it
     attribute_below_floor: bool = True
     # each order's held-out features are also tested on their own: a sweep under
     # no_gap_per_feature still goes to the candidates when the mean z2 of its held-out
@@ -52,9 +54,8 @@ class DiagnosisSettings:
     order_floors_z2: tuple[float, float, float] | None = (2.48, 1.81, 1.76)
     # try pairs when the best single leaves this excess per feature, and a pair must
     # remove pair_gain of what the best single leaves; frozen on own-family pilot trials
-    # like the rest. The lower trigger and stricter gain chosen on logged runs of an
-    # independent plant (0.2 and 0.5) lost right verdicts on both independent plants
-    # when measured blind (docs/gap_validation.md, *The 43000 run*)
+    # like the rest (a lower trigger and a stricter gain chosen on an independent
+    # plant's logs lost right verdicts on both independent plants when scored blind)
     pair_trigger: float = 0.5
     pair_gain: float = 0.3
     # ... and score (AIC: held-out excess + 2 per parameter) this much below it; None: the
@@ -65,19 +66,15 @@ class DiagnosisSettings:
     # one signature, and together they fit what the lead's form leaves of a rotor it
     # does not describe exactly -- on both independent plants a rub came out as rub +
     # crack (the crack alone removing 0.84-0.99) and a crack as crack + misalignment --
-    # while a true pair's weaker member alone removed at most 0.69 on the eight blind
-    # runs 31000-45000. Chosen on those runs' logs (0.7-0.9 gain the same; the middle
-    # taken) and then scored on fresh seeds (docs/gap_validation.md, *The 47000 run*);
-    # None: no such test
+    # while a true pair's weaker member alone removed at most 0.69; 0.7-0.9 did the same
+    # and the middle is taken; None: no such test
     pair_rival_shrink: float | None = 0.8
     # a candidate whose member has a linear form (an anisotropy's is the isotropic
     # support) is judged only if that member removes this share of what its linear form
     # leaves (sknarx.gap.core.beats_linear_form): less is what a change of the linear
-    # rotor explains -- model error, by the rule that separates the two. Measured on
-    # logged blind runs at pair_gain's value (0.3, what a pair's second member must
-    # remove too) and then scored on fresh seeds (docs/gap_validation.md, *The
-    # anisotropy against its isotropic form* and *The 49000 run*); None: the search's
-    # own test (the member scores better than its form) alone
+    # rotor explains -- model error, by the rule that separates the two. Set at
+    # pair_gain's value (0.3, what a pair's second member must remove too); None: the
+    # search's own test (the member scores better than its form) alone
     linear_form_gain: float | None = 0.3
     n_partners: int = 3  # partners tried with the best single (probed on top of its fit)
     max_nfev: int = 15
@@ -86,9 +83,7 @@ class DiagnosisSettings:
     # small corner of its range that 16 settings missed on an independent plant (shrink
     # 0.52 against 0.955 with 64; each probe is one warm-started evaluation), and 64
     # left three rubs of the two independent plants in a basin with the stator pushed
-    # sideways, where 128 found the contact on the bearing line at the same cost
-    # (docs/gap_validation.md, *ROSS's rub friction*; measured side by side with 64 it
-    # costs no more, *Cost history*; the blind score is pending)
+    # sideways, where 128 found the contact on the bearing line at no more cost
     n_probe: int = 128
     # ... at most this many per probed parameter (rounded up to a power of two): a
     # one-parameter clearance gets 16, a two-parameter looseness 32, a four-parameter
@@ -96,8 +91,7 @@ class DiagnosisSettings:
     probes_per_parameter: int | None = 16
     # a pair's partner is probed (and then fitted) on top of the lead's converged fit,
     # a better informed start than a single's: half the probes per parameter and half
-    # the short local runs per discrete setting (calibrate's n_short: 4 for singles);
-    # what it saves and costs is measured in docs/gap_validation.md (Cost history)
+    # the short local runs per discrete setting (calibrate's n_short: 4 for singles)
     pair_probes_per_parameter: int | None = 8
     pair_short_starts: int = 2
     transient_s: float = 0.5  # transient window of records that start with a transient
@@ -129,7 +123,7 @@ class DiagnosisSettings:
     # the simulator's integration step for every sweep the diagnosis runs (h |lambda|max
     # <= step_factor; RK4 is stable to ~2.8): 2.5 takes 4 steps per 1 kHz sample on the
     # paper rotor instead of the simulator's default 5, a fifth less per evaluation,
-    # and moves the features by a small share of their standard errors (docs/gap.md)
+    # and moves the features by a small share of their standard errors
     step_factor: float = 2.5
     # a discrete setting (a crack's station, a rub's disk, a misalignment's end) is
     # reported as decided where the held-out speeds prefer it over every other setting
