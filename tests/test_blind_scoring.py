@@ -776,3 +776,42 @@ def test_the_closest_candidate_of_unexplained_verdicts_on_the_pooled_runs(packag
                     holds += 1
                     breadth_only += near["short_of"] == ["breadth"]
     assert (out, on_lib, holds, breadth_only) == (97, 25, 13, 8)
+
+
+def test_where_the_package_rule_misses_and_what_each_plant_can_reach(package_runs):
+    """``misses_gap_blind`` (docs/gap_validation.md, *Where the package's rule misses*):
+    on 51000-59000, ROSS's top-1 can reach 124/137 with every miss whose effect the
+    update left visible named right, and its pairs 31/42, short of 0.80: 11 of its 12
+    pair misses have a member the update followed, and on each of them the other member
+    alone leaves no more than it does on some trial where it is alone. The second
+    plant's separable single misses are its loose joints but one rub."""
+    import misses_gap_blind as misses
+
+    got = misses.misses(package_runs)
+    ross, second = (misses.totals(got[f]["singles"]) for f in ("ross", "second"))
+    assert ross["rate"] == [117, 137] and ross["reach"] == [124, 137]
+    assert ross["separable"] == [112, 119]
+    assert second["reach"] == [152, 160] and second["separable"] == [134, 149]
+    loose = got["second"]["singles"]["looseness"]
+    assert (loose["right"], loose["separable_misses"], loose["trials"]) == (0, 14, 15)
+    assert {t for t, c in got["second"]["singles"].items() if c["separable_misses"]} == {
+        "looseness", "rub"}
+    pairs = misses.totals(got["ross"]["pairs"])
+    assert pairs["rate"] == [30, 42] and pairs["reach"] == [31, 42]
+    assert pairs["followed_misses"] == 11 and pairs["reach"][0] / pairs["reach"][1] < 0.80
+    runout_alone = misses.alone_leaves(package_runs, "ross", "runout", "runout")
+    assert len(runout_alone) == 20
+    c = got["ross"]["pairs"]["anisotropy + runout"]
+    on_pair = misses.alone_leaves(package_runs, "ross", "runout", ["anisotropy", "runout"])
+    assert c["followed_misses"] == 8
+    assert all(on_pair[s] <= max(runout_alone.values()) for s in c["followed_seeds"])
+    # a trigger at their smallest leftover would try partners on most runout-only trials
+    lowest = min(on_pair[s] for s in c["followed_seeds"])
+    assert sum(v >= lowest for v in runout_alone.values()) == 16
+    # each counted once: the split adds up
+    for fam in ("ross", "second"):
+        for kind in ("singles", "pairs"):
+            for cnt in got[fam][kind].values():
+                assert cnt["separable"] + cnt["followed"] == cnt["trials"]
+                assert cnt["trials"] - cnt["right"] == (cnt["separable_misses"]
+                                                        + cnt["followed_misses"])
