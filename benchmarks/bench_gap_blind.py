@@ -77,7 +77,8 @@ from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 #: the pair trigger every blind run searches with, whatever the package decides with:
 #: pairs are fitted wherever the best single leaves more than this per feature, so a
 #: logged run can be decided again under any trigger from here up
-#: (``rescore_gap_blind.py``)
+#: (``rescore_gap_blind.py``). It is the package's own ``pair_search_trigger``, so the
+#: rankings scored are those ``sknarx gap`` makes
 SEARCH_PAIR_TRIGGER = 0.2
 
 

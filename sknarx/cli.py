@@ -139,16 +139,18 @@ def _gap(args) -> int:
 def _verdict_line(doc) -> str:
     """What ``sknarx gap`` prints for its verdict: the share removed, model error where
     the verdict carries one, the rotor's reading, and for ``unexplained`` the report's
-    sentence on the closest candidate (``diagnosis.json``'s ``closest``) below it."""
-    from .gap.report import closest_text
+    sentence on the closest candidate (``diagnosis.json``'s ``closest``) below it, and
+    the report's sentence on a ranked pair the pair trigger kept from the verdict
+    (``pair_under_trigger``)."""
+    from .gap.report import closest_text, under_trigger_text
 
     line = (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
             + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
                if doc.get("model_error") else "")
             + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
                if doc.get("rotor_reading") else ""))
-    near = closest_text(doc).strip()
-    return f"{line}\n{near}" if near else line
+    notes = [t for t in (closest_text(doc).strip(), under_trigger_text(doc).strip()) if t]
+    return "\n".join([line, *notes])
 
 
 def _unbalance(args) -> int:

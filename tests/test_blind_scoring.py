@@ -808,6 +808,11 @@ def test_where_the_package_rule_misses_and_what_each_plant_can_reach(package_run
     # a trigger at their smallest leftover would try partners on most runout-only trials
     lowest = min(on_pair[s] for s in c["followed_seeds"])
     assert sum(v >= lowest for v in runout_alone.values()) == 16
+    # the rankings as scored (pairs searched from 0.2) and cut back to a search from 0.5
+    assert misses.pairs_in_top2_searched_from(package_runs, "ross", 0.2) == [30, 42]
+    assert misses.pairs_in_top2_searched_from(package_runs, "ross", 0.5) == [27, 42]
+    assert misses.pairs_in_top2_searched_from(package_runs, "second", 0.2) == [38, 45]
+    assert misses.pairs_in_top2_searched_from(package_runs, "second", 0.5) == [31, 45]
     # each counted once: the split adds up
     for fam in ("ross", "second"):
         for kind in ("singles", "pairs"):
@@ -815,3 +820,34 @@ def test_where_the_package_rule_misses_and_what_each_plant_can_reach(package_run
                 assert cnt["separable"] + cnt["followed"] == cnt["trials"]
                 assert cnt["trials"] - cnt["right"] == (cnt["separable_misses"]
                                                         + cnt["followed_misses"])
+
+
+def test_the_pair_trigger_ladder_decides_logged_trials_as_the_package_rule_does(
+        package_runs):
+    """``bench_gap_pair_trigger``: its trials are ROSS's 8 missed anisotropy + runout
+    pairs the update hid (drawn as the plan drew them) and its 20 visible runout-only
+    trials; decided from the runs' own logs at the package's trigger, no pair is named
+    and every runout is right -- the verdicts the pooled score counts."""
+    import bench_gap_pair_trigger as trig
+
+    todo = trig.trials("ross", ["anisotropy", "runout"], "runout")
+    kinds = [k for k, _, _ in todo]
+    assert kinds.count("runout") == 20 and kinds.count(("anisotropy", "runout")) == 8
+    logged = {(r["seed"]): (r, rule) for rule, evals in package_runs for r in evals["ross"]}
+    (at_package,) = trig.ladder([logged[s] for _, s, _ in todo], triggers=(0.5,))
+    assert (at_package["pairs named"], at_package["pairs"]) == (0, 8)
+    assert (at_package["singles right"], at_package["singles"]) == (20, 20)
+    assert at_package["singles given a partner"] == 0
+
+
+def test_the_blind_runs_search_pairs_as_the_package_does():
+    """The blind benchmark's rankings (pairs in the top two) are scored on a search with
+    pairs from ``SEARCH_PAIR_TRIGGER``; that is the package's own default search, so the
+    rate describes what ``sknarx gap`` ranks. Its verdicts are decided at the package's
+    ``pair_trigger``, which a search from that trigger reaches."""
+    from sknarx.gap import DiagnosisSettings
+    from sknarx.gap.core import pair_search_from
+
+    assert blind.SEARCH_PAIR_TRIGGER == DiagnosisSettings().pair_search_trigger
+    assert pair_search_from(blind.search_settings()) == pair_search_from(DiagnosisSettings())
+    assert DiagnosisSettings().pair_trigger >= blind.SEARCH_PAIR_TRIGGER

@@ -96,7 +96,8 @@ def test_api_reference_is_generated_from_current_docstrings():
 
 def test_the_gap_verdict_line_names_the_closest_candidate_of_an_unexplained_verdict():
     """``sknarx gap``'s verdict line: as before for a named verdict; for ``unexplained``
-    the report's sentence on the closest candidate follows on a line of its own."""
+    the report's sentence on the closest candidate follows on a line of its own, and so
+    does its sentence on a pair ranked but kept from the verdict by the pair trigger."""
     from sknarx.cli import _verdict_line
 
     assert _verdict_line({"verdict": "rub", "shrink": 0.9}) == (
@@ -111,3 +112,13 @@ def test_the_gap_verdict_line_names_the_closest_candidate_of_an_unexplained_verd
         "effect needs 60 % and 30 %.")
     doc["closest"]["short_of"] = []
     assert _verdict_line(doc) == "verdict: unexplained; held-out gap removed: 87 %"
+    # a named single with a ranked pair the pair trigger kept from the verdict
+    doc = {"verdict": "runout", "shrink": 0.99,
+           "pair_under_trigger": {"effect": ["runout", "anisotropy"], "single": "runout",
+                                  "removes_of_single": 0.68,
+                                  "single_leaves_per_feature": 0.146, "pair_trigger": 0.5}}
+    assert _verdict_line(doc) == (
+        "verdict: runout; held-out gap removed: 99 %\nThe pair runout + anisotropy is "
+        "ranked and removes 68 % of what runout alone leaves, but runout already leaves "
+        "0.146 per feature, no more than the 0.5 a second effect must explain to be "
+        "named: a lead to check, not a finding.")

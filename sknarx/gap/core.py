@@ -38,7 +38,8 @@ from .._progress import progress_bar
 __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", "closest",
            "conclude", "decide", "effect_names", "log_shrink", "order_floors",
            "order_mean_z2", "orders_over_floor",
-           "preferred", "public_ranking", "rank", "recheck_choice", "regions_after",
+           "pair_search_from", "pair_under_trigger", "preferred", "public_ranking", "rank",
+           "recheck_choice", "regions_after",
            "run_parallel", "search", "setting_support", "shortfalls", "shrink",
            "table_evidence"]
 
@@ -205,6 +206,13 @@ def rank(fits: list, E0: float, cmp0: pd.DataFrame) -> list[dict]:
     return out
 
 
+def pair_search_from(settings) -> float:
+    """The excess per feature above which the best single gets partners: pairs are
+    searched from ``pair_search_trigger`` and named only above ``pair_trigger``, and a
+    pair that is not searched cannot be named, so the smaller of the two."""
+    return min(settings.pair_trigger, settings.pair_search_trigger)
+
+
 def preferred(ranking: list, settings, n_features: int):
     """The best single candidate, or the best pair where it earns its place: the single
     leaves more than ``pair_trigger`` excess per feature, the pair removes
@@ -271,6 +279,28 @@ def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | Non
             "heldout_gap_after": plain["heldout_gap_after"],
             "members_alone": {name: alone[name] for name in effect_names(plain)},
             "pair_rival_shrink": settings.pair_rival_shrink}
+
+
+def pair_under_trigger(ranking: list, settings, n_features: int) -> dict | None:
+    """The ranking's entry for the pair :func:`preferred` would have chosen but for the
+    pair trigger: pairs are searched from ``pair_search_trigger``, and a pair found
+    where the best single leaves no more than ``pair_trigger`` per feature is ranked,
+    not named. With it the single (``single``), what the single leaves per feature
+    (``single_leaves_per_feature``), the share of that the pair removes
+    (``removes_of_single``) and the trigger; None where the trigger changed nothing."""
+    plain = preferred(ranking, replace(settings, pair_trigger=0.0), n_features)
+    if (plain is None or len(effect_names(plain)) != 2
+            or preferred(ranking, settings, n_features) is plain):
+        return None
+    singles = [r for r in ranking if len(effect_names(r)) <= 1
+               and beats_linear_form(r, settings.linear_form_gain)]
+    best = min(singles, key=lambda r: r["score"])
+    left = best["heldout_gap_after"]
+    return {"effect": plain["effect"], "shrink": plain["shrink"],
+            "heldout_gap_after": plain["heldout_gap_after"], "single": best["effect"],
+            "single_leaves_per_feature": left / n_features,
+            "removes_of_single": 1.0 - plain["heldout_gap_after"] / left if left > 0 else 0.0,
+            "pair_trigger": settings.pair_trigger}
 
 
 def shrinks_alone(ranking: list) -> dict[str, float]:
@@ -444,7 +474,8 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
        or not pairs follow: a pair is warm-started from the lead's fit, and the lead
        gets the same chance, so a partner is not credited with the lead's convergence
        and the verdict does not depend on the pair trigger.
-    3. If the lead leaves more than ``pair_trigger`` excess per feature: the lead with
+    3. If the lead leaves more than ``pair_search_trigger`` (or ``pair_trigger``, the
+       smaller) excess per feature: the lead with
        each of up to ``n_partners`` partners (``front.partners``, ``front.fit_pair``);
        each member of the best pair is then refitted alone from it
        (``front.refit_members``) and replaces its single fit where it does better.
@@ -478,7 +509,7 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
             lead = rank(singles, E0, cmp0)[0]["_fit"]
         tick("lead continued")
     pairs = []
-    if lead.heldout_excess / n_features > settings.pair_trigger:
+    if lead.heldout_excess / n_features > pair_search_from(settings):
         others = [c for c in candidates if (c,) != lead.names]
         partners = front.partners(lead, others, settings.n_partners)
         pairs = run_parallel(settings.n_jobs,
@@ -581,24 +612,30 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings,
     after; ``model_error`` where the chosen candidate carries one (the linear form of a
     member that was no effect, see :func:`search`) and ``setting_decided`` where it has
     discrete settings (see :func:`setting_support`); ``rival_pair`` where a pair would
-    have been named but for the rival test (:func:`rival_pair_set_aside`); for
+    have been named but for the rival test (:func:`rival_pair_set_aside`) and
+    ``pair_under_trigger`` where it would have been but for the pair trigger
+    (:func:`pair_under_trigger`); for
     ``unexplained``, ``closest`` (:func:`closest`). ``n_features``: the held-out
     features :func:`decide` was given (default: the rows of ``cmp0``)."""
     if choice == "no-gap":
         return {"verdict": "no-gap", "shrink": 0.0}
     n_features = max(len(cmp0) if n_features is None else n_features, 1)
     aside = rival_pair_set_aside(ranking, settings, n_features)
-    rival = {"rival_pair": aside} if aside is not None else {}
+    # what the verdict rule set aside, said beside whatever it names
+    notes = {"rival_pair": aside} if aside is not None else {}
+    under = pair_under_trigger(ranking, settings, n_features)
+    if under is not None:
+        notes["pair_under_trigger"] = under
     if choice is None:
         near = closest(ranking, settings, n_features)
         return {"verdict": "unexplained",
-                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0, **rival,
+                "shrink": max(ranking[0]["shrink"], 0.0) if ranking else 0.0, **notes,
                 **({"closest": near} if near is not None else {})}
     cmp = choice["_cmp"]
     gap_after = {"heldout_excess": choice["heldout_gap_after"],
                  "rms_gap_m": float(np.sqrt(np.mean(cmp["gap"] ** 2)))}
     extra = {"model_error": choice["model_error"]} if choice.get("model_error") else {}
-    extra.update(rival)
+    extra.update(notes)
     if not effect_names(choice):  # model error alone explains the gap: no effect
         return {"verdict": "no-gap", "shrink": 0.0, "gap_after": gap_after, **extra}
     if "setting_decided" in choice:

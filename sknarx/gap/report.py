@@ -253,6 +253,20 @@ def _rival_text(doc) -> str:
             "named.")
 
 
+def under_trigger_text(doc) -> str:
+    """The verdict's note where the pair trigger kept a ranked pair from being named
+    (``sknarx.gap.core.pair_under_trigger``)."""
+    under = doc.get("pair_under_trigger")
+    if not under:
+        return ""
+    return (f" The pair {_label(under['effect'])} is ranked and removes "
+            f"{100 * float(under['removes_of_single']):.0f} % of what {_label(under['single'])} "
+            f"alone leaves, but {_label(under['single'])} already leaves "
+            f"{float(under['single_leaves_per_feature']):.3g} per feature, no more than the "
+            f"{float(under['pair_trigger']):.3g} a second effect must explain to be named: "
+            "a lead to check, not a finding.")
+
+
 def _linear_form_text(entry, gain=None) -> str:
     """What the effect-or-model-error test (``sknarx.gap.core.search``, step 4) found for
     a ranking entry: the candidate it replaced, or the linear forms it beat, with the
@@ -390,7 +404,8 @@ def _html(doc, figs, prov):
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
                     "a nominal model further from the rig than the nuisance scalars allow."
-                    + closest_text(doc) + _orders_text(doc) + _rival_text(doc))
+                    + closest_text(doc) + _orders_text(doc) + _rival_text(doc)
+                    + under_trigger_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
@@ -402,7 +417,7 @@ def _html(doc, figs, prov):
                        f"not an effect): {error}." if error else "")
                     + _reading_text(doc)
                     + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc)
-                    + alike_text(verdict))
+                    + under_trigger_text(doc) + alike_text(verdict))
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
