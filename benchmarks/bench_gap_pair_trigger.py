@@ -3,7 +3,7 @@
 Run: ``python benchmarks/bench_gap_pair_trigger.py [--family ross] [--pair
 anisotropy,runout] [--lead runout] [--shard 0/2]`` (resumable: every finished trial is
 appended to its shard's ``results/gap_pair_trigger.shard<i>of<n>.jsonl``; once all
-are logged, any process writes ``results/gap_pair_trigger.json``).
+are logged, any process writes ``results/gap_pair_trigger_<pair>.json``).
 ``misses_gap_blind.py`` found that on ROSS the pairs whose second member the nominal
 update followed (a mild anisotropy beside a runout) are missed because the runout alone
 leaves as little as it does on runout-only trials, under the pair trigger, so no
@@ -39,15 +39,17 @@ from frontier_gap_blind import decided_runs  # noqa: E402
 from misses_gap_blind import misses  # noqa: E402
 from plants.families import PAIRS  # noqa: E402
 
+from sknarx.gap.core import effect_names  # noqa: E402
+
 #: one log per shard process (``gap_pair_trigger.shard<i>of<n>.jsonl``), read together
 LOGS = "gap_pair_trigger.shard*.jsonl"
 TRIGGERS = (0.5, 0.2, 0.1, 0.06, 0.03, 0.0)
 
 
-def trials(family, pair, lead):
-    """The missed ``pair`` trials whose member the update followed, and the visible
-    ``lead``-only trials, of ``family`` on the package rule's runs: ``(kind, seed, the
-    rule that decided it)``."""
+def trials(family, pair, lead, singles=True):
+    """The missed ``pair`` trials whose member the update followed, and (with
+    ``singles``) the visible ``lead``-only trials, of ``family`` on the package rule's
+    runs: ``(kind, seed, the rule that decided it)``."""
     decided = decided_runs()
     label = " + ".join(sorted(pair))
     seeds = set(misses(decided)[family]["pairs"][label]["followed_seeds"])
@@ -58,13 +60,13 @@ def trials(family, pair, lead):
                 # as the blind run drew it: the plan's own tuple
                 out.append((next(p for p in PAIRS if sorted(p) == sorted(pair)),
                             rec["seed"], rule))
-            elif rec["kind"] == lead and truth_label(rec, rule) == lead \
+            elif singles and rec["kind"] == lead and truth_label(rec, rule) == lead \
                     and rec["effect_gap"] > rule.no_gap_per_feature:
                 out.append((lead, rec["seed"], rule))
     return out
 
 
-def _logged():
+def logged_trials():
     """Every logged trial of every shard, by (family, kind, seed, code hash)."""
     out = {}
     for log in sorted(RESULTS.glob(LOGS)):
@@ -74,21 +76,32 @@ def _logged():
     return out
 
 
+def _top2_searched_from(rec, trigger):
+    """The effects in the top two of a logged ranking cut back to a search that tries
+    partners only where the best single leaves more than ``trigger`` per feature."""
+    singles = [r for r in rec["ranking"] if len(effect_names(r)) <= 1]
+    best = min((r["E"] for r in singles), default=0.0) / rec["n_features"]
+    ranking = rec["ranking"] if best > trigger else singles
+    return {m for r in ranking[:2] for m in effect_names(r)}
+
+
 def ladder(recs, triggers=TRIGGERS):
     """``recs``, ``(logged trial, its rule)`` pairs, decided at each pair trigger of
     ``triggers`` with the rule's other thresholds: per trigger, how many pair trials are
-    named as their pair and how many single trials are named right or given a partner
-    beside their effect. Only triggers at or above the search's own are meaningful (a
-    pair not searched cannot be named)."""
+    named as their pair, how many have both members in the top two of their ranking cut
+    back to a search from that trigger, and how many single trials are named right or
+    given a partner beside their effect. Only triggers at or above the search's own are
+    meaningful (a pair not searched cannot be named)."""
     out = []
     for t in triggers:
-        got = {"pair_trigger": t, "pairs named": 0, "pairs": 0, "singles right": 0,
-               "singles": 0, "singles given a partner": 0}
+        got = {"pair_trigger": t, "pairs named": 0, "pairs in top two": 0, "pairs": 0,
+               "singles right": 0, "singles": 0, "singles given a partner": 0}
         for rec, rule in recs:
             v = verdict(rec, replace(rule, pair_trigger=t))[0]
             if isinstance(rec["kind"], list):
                 got["pairs"] += 1
                 got["pairs named"] += v == sorted(rec["kind"])
+                got["pairs in top two"] += set(rec["kind"]) <= _top2_searched_from(rec, t)
             else:
                 got["singles"] += 1
                 got["singles right"] += v == rec["kind"]
@@ -103,13 +116,16 @@ def main(argv=None):
     ap.add_argument("--pair", default="anisotropy,runout")
     ap.add_argument("--lead", default="runout")
     ap.add_argument("--shard", default="0/1", help="this process's share, i/n")
+    ap.add_argument("--no-singles", action="store_true",
+                    help="the pair trials only: whether they reach the top two, not what "
+                         "the search costs the lead's own trials")
     args = ap.parse_args(argv)
     pair = args.pair.split(",")
     i, n = (int(v) for v in args.shard.split("/"))
-    todo = trials(args.family, pair, args.lead)
+    todo = trials(args.family, pair, args.lead, singles=not args.no_singles)
     code = code_hash()
     settings = replace(search_settings(), pair_trigger=0.0)
-    done = _logged()
+    done = logged_trials()
     log = RESULTS / f"gap_pair_trigger.shard{i}of{n}.jsonl"
     mine = [t for k, t in enumerate(todo) if k % n == i]
     for kind, seed, _ in tqdm(mine, desc="trials", unit="trial", file=sys.stderr):
@@ -119,7 +135,7 @@ def main(argv=None):
         rec = {**run_trial(kind, seed, args.family, settings), "code": code}
         with log.open("a") as f:
             f.write(json.dumps(rec, default=float) + "\n")
-    done = _logged()
+    done = logged_trials()
     recs = [(done.get((args.family, json.dumps(k), s, code)), rule) for k, s, rule in todo]
     if any(r is None for r, _ in recs):
         print(f"{sum(r is None for r, _ in recs)} of {len(recs)} trials still to run",
@@ -127,13 +143,15 @@ def main(argv=None):
         return
     out = ladder(recs)
     rows = [[o["pair_trigger"], f"{o['pairs named']}/{o['pairs']}",
+             f"{o['pairs in top two']}/{o['pairs']}",
              f"{o['singles right']}/{o['singles']}", o["singles given a partner"]]
             for o in out]
     print(f"{args.family}: the missed {' + '.join(pair)} pairs the update hid, and the "
           f"{args.lead}-only trials, searched with pairs everywhere (code {code})")
-    table(rows, ["pair trigger", "pairs named", f"{args.lead} singles right",
+    table(rows, ["pair trigger", "pairs named", "pairs in the top two",
+                 f"{args.lead} singles right",
                  "singles given a partner"])
-    write_json("gap_pair_trigger", {
+    write_json(f"gap_pair_trigger_{'+'.join(sorted(pair))}", {
         "command": "python benchmarks/bench_gap_pair_trigger.py " + " ".join(argv or sys.argv[1:]),
         "family": args.family, "pair": pair, "lead": args.lead, "code": code,
         "trials": [[k, s] for k, s, _ in todo], "by_trigger": out})

@@ -15,10 +15,11 @@ A plant's *reach* is the rate it would have with every separable miss right and 
 others as they are: the target is scored on every visible effect
 (``bench_gap_blind.visible``), not only on those the update leaves visible. A target
 above the reach needs trials named that the updated model already explains to within
-the noise floor, which a better candidate form or search does not give; whether any
-rule could name them without naming the same effect where it is absent is what
-:func:`alone_leaves` measures (what one candidate alone leaves, on trials of two
-truths). This is analysis of finished runs; it sets nothing.
+the noise floor, which a better candidate form does not give. Whether a rule could name
+them without naming the same effect where it is absent starts from
+:func:`alone_leaves` (what one candidate alone leaves, on trials of two truths); a
+deeper pair search is tried in ``bench_gap_pair_trigger.py``. This is analysis of
+finished runs; it sets nothing.
 """
 
 from __future__ import annotations
