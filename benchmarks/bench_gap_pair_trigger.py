@@ -36,10 +36,8 @@ from bench_gap_blind import (  # noqa: E402
     verdict,
 )
 from frontier_gap_blind import decided_runs  # noqa: E402
-from misses_gap_blind import misses  # noqa: E402
+from misses_gap_blind import misses, top2_searched_from  # noqa: E402
 from plants.families import PAIRS  # noqa: E402
-
-from sknarx.gap.core import effect_names  # noqa: E402
 
 #: one log per shard process (``gap_pair_trigger.shard<i>of<n>.jsonl``), read together
 LOGS = "gap_pair_trigger.shard*.jsonl"
@@ -76,15 +74,6 @@ def logged_trials():
     return out
 
 
-def _top2_searched_from(rec, trigger):
-    """The effects in the top two of a logged ranking cut back to a search that tries
-    partners only where the best single leaves more than ``trigger`` per feature."""
-    singles = [r for r in rec["ranking"] if len(effect_names(r)) <= 1]
-    best = min((r["E"] for r in singles), default=0.0) / rec["n_features"]
-    ranking = rec["ranking"] if best > trigger else singles
-    return {m for r in ranking[:2] for m in effect_names(r)}
-
-
 def ladder(recs, triggers=TRIGGERS):
     """``recs``, ``(logged trial, its rule)`` pairs, decided at each pair trigger of
     ``triggers`` with the rule's other thresholds: per trigger, how many pair trials are
@@ -101,7 +90,7 @@ def ladder(recs, triggers=TRIGGERS):
             if isinstance(rec["kind"], list):
                 got["pairs"] += 1
                 got["pairs named"] += v == sorted(rec["kind"])
-                got["pairs in top two"] += set(rec["kind"]) <= _top2_searched_from(rec, t)
+                got["pairs in top two"] += set(rec["kind"]) <= top2_searched_from(rec, t)
             else:
                 got["singles"] += 1
                 got["singles right"] += v == rec["kind"]

@@ -114,6 +114,16 @@ def alone_leaves(decided, family, effect, kind):
     return out
 
 
+def top2_searched_from(rec, trigger):
+    """The effects in the top two of a logged trial's ranking cut back to a search that
+    tries partners only where the best single leaves more than ``trigger`` per feature
+    (its pair entries dropped elsewhere)."""
+    singles = [r for r in rec["ranking"] if len(effect_names(r)) <= 1]
+    best = min((r["E"] for r in singles), default=0.0) / rec["n_features"]
+    ranking = rec["ranking"] if best > trigger else singles
+    return {m for r in ranking[:2] for m in effect_names(r)}
+
+
 def pairs_in_top2_searched_from(decided, family, trigger):
     """``[k, n]``: the visible pair trials of ``family`` whose two members are both in
     the top two of the logged ranking cut back to a search that tries partners only
@@ -127,11 +137,8 @@ def pairs_in_top2_searched_from(decided, family, trigger):
         for rec in evals.get(family, []):
             if not detectable(rec, rule) or isinstance(truth_label(rec, rule), str):
                 continue
-            singles = [r for r in rec["ranking"] if len(effect_names(r)) <= 1]
-            best = min((r["E"] for r in singles), default=0.0) / rec["n_features"]
-            ranking = rec["ranking"] if best > trigger else singles
             n += 1
-            k += set(rec["kind"]) <= {m for r in ranking[:2] for m in effect_names(r)}
+            k += set(rec["kind"]) <= top2_searched_from(rec, trigger)
     return [k, n]
 
 
