@@ -289,12 +289,10 @@ def pair_under_trigger(ranking: list, settings, n_features: int) -> dict | None:
     (``single_leaves_per_feature``), the share of that the pair removes
     (``removes_of_single``) and the trigger; None where the trigger changed nothing."""
     plain = preferred(ranking, replace(settings, pair_trigger=0.0), n_features)
-    if (plain is None or len(effect_names(plain)) != 2
-            or preferred(ranking, settings, n_features) is plain):
+    # preferred names the best pair or the best single: not the pair, so the single
+    best = preferred(ranking, settings, n_features)
+    if plain is None or len(effect_names(plain)) != 2 or best is plain:
         return None
-    singles = [r for r in ranking if len(effect_names(r)) <= 1
-               and beats_linear_form(r, settings.linear_form_gain)]
-    best = min(singles, key=lambda r: r["score"])
     left = best["heldout_gap_after"]
     return {"effect": plain["effect"], "shrink": plain["shrink"],
             "heldout_gap_after": plain["heldout_gap_after"], "single": best["effect"],
