@@ -44,11 +44,12 @@ LOGS = "gap_pair_trigger.shard*.jsonl"
 TRIGGERS = (0.5, 0.2, 0.1, 0.06, 0.03, 0.0)
 
 
-def trials(family, pair, lead, singles=True):
+def trials(family, pair, lead, singles=True, decided=None):
     """The missed ``pair`` trials whose member the update followed, and (with
     ``singles``) the visible ``lead``-only trials, of ``family`` on the package rule's
-    runs: ``(kind, seed, the rule that decided it)``."""
-    decided = decided_runs()
+    runs (``decided``, from :func:`frontier_gap_blind.decided_runs`; loaded if not
+    given): ``(kind, seed, the rule that decided it)``."""
+    decided = decided_runs() if decided is None else decided
     label = " + ".join(sorted(pair))
     seeds = set(misses(decided)[family]["pairs"][label]["followed_seeds"])
     out = []

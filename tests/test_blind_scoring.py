@@ -830,7 +830,7 @@ def test_the_pair_trigger_ladder_decides_logged_trials_as_the_package_rule_does(
     and every runout is right -- the verdicts the pooled score counts."""
     import bench_gap_pair_trigger as trig
 
-    todo = trig.trials("ross", ["anisotropy", "runout"], "runout")
+    todo = trig.trials("ross", ["anisotropy", "runout"], "runout", decided=package_runs)
     kinds = [k for k, _, _ in todo]
     assert kinds.count("runout") == 20 and kinds.count(("anisotropy", "runout")) == 8
     logged = {(r["seed"]): (r, rule) for rule, evals in package_runs for r in evals["ross"]}
@@ -854,7 +854,7 @@ def test_the_blind_runs_search_pairs_as_the_package_does():
     assert DiagnosisSettings().pair_trigger >= blind.SEARCH_PAIR_TRIGGER
 
 
-def test_the_deeper_pair_search_logs_give_the_figures_of_the_record():
+def test_the_deeper_pair_search_logs_give_the_figures_of_the_record(package_runs):
     """docs/gap_validation.md, *Would a deeper pair search find the hidden ROSS pairs?*:
     the committed logs of ``bench_gap_pair_trigger`` (pairs searched on every trial),
     decided with each trial's own rule. From a trigger of 0.1, 3 of the 8 anisotropy +
@@ -868,7 +868,8 @@ def test_the_deeper_pair_search_logs_give_the_figures_of_the_record():
 
     def at(pair, lead, singles=True, triggers=(0.5, 0.1, 0.0)):
         recs = []
-        for kind, seed, rule in trig.trials("ross", pair, lead, singles=singles):
+        for kind, seed, rule in trig.trials("ross", pair, lead, singles=singles,
+                                            decided=package_runs):
             key = json.dumps(sorted(kind) if not isinstance(kind, str) else kind)
             recs.append((logged[(seed, key)], rule))
         return {o["pair_trigger"]: o for o in trig.ladder(recs, triggers)}
