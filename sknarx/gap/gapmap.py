@@ -144,7 +144,7 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
 
 
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                max_offset_deg, whirl=None):
+                max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
     ``(M - S) / sigma`` per feature, complex, and the phase-aligned measured ``M``.
 
@@ -181,7 +181,7 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
     harmonic = ~nons & ~is1
     var = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2,
                    se_m**2 + se_s**2) + (rtol * np.abs(Sc)) ** 2 + tol**2
-    var = var + np.where(harmonic, (HARMONIC_RTOL * np.minimum(np.abs(M), np.abs(Sc))) ** 2,
+    var = var + np.where(harmonic, (harmonic_rtol * np.minimum(np.abs(M), np.abs(Sc))) ** 2,
                          0.0)
     d = (M - Sc) / np.sqrt(np.maximum(var, 1e-300))
     if whirl is not None and whirl[0].size:
@@ -204,8 +204,12 @@ def feature_layout(index: pd.MultiIndex):
 
 
 def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
-            max_offset_deg: float = 5.0) -> pd.DataFrame:
+            max_offset_deg: float = 5.0, harmonic_rtol: float = HARMONIC_RTOL) -> pd.DataFrame:
     """Feature-by-feature gap between measured and simulated order features.
+
+    ``harmonic_rtol`` is the harmonics' share of model-form tolerance
+    (:data:`HARMONIC_RTOL`); two records of one rotor (:mod:`sknarx.gap.passes`) have no
+    model form between them and compare with 0.
 
     A ``model_tol`` column in ``meas`` (m) widens each feature's tolerance by the
     model-form error the nominal model is allowed (see ``diagnosis``); harmonics agree
@@ -224,7 +228,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     tol = model_tol(m)
     d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k,
                        speed_idx, group_idx, tol, rtol, max_offset_deg,
-                       whirl_layout(m.index, whirl_tol(m)))
+                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol)
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)
