@@ -213,21 +213,31 @@ def _ross_sweep(truth, physical, settle, plant=None, speeds=None):
 _SWEEP = {"own": (_own_sweep, 2.0), "second": (_second_sweep, 1.5), "ross": (_ross_sweep, 1.0)}
 
 
-def simulate(family, truth, physical, plant=None):
+def time_varying(physical):
+    """Whether an effect of ``physical`` changes from step to step (the relaxing bow)."""
+    return "relax_steps" in physical.get("thermal-bow", {})
+
+
+def simulate(family, truth, physical, plant=None, pass_index=0):
     """The clean stepped sweep of ``family`` with the ``physical`` effects (SI).
 
     Every family's steps are settled independently, so an effect that changes from
     step to step -- the relaxing thermal bow -- is simulated step by step with that
-    step's value; everything else in one sweep.
+    step's value; everything else in one sweep. ``pass_index`` 1 is the coast-down
+    right after the run-up (:func:`make_family_passes`): its steps run from the highest
+    speed down, and the bow goes on relaxing, step ``2 n - 1 - i`` at the ``i``-th
+    speed of ``n``; a time-invariant plant's coast-down is its run-up.
     """
     import pandas as pd
 
     sweep, settle = _SWEEP[family]
     bow = physical.get("thermal-bow")
-    if bow is None or "relax_steps" not in bow:
+    if not time_varying(physical):
         return sweep(truth, physical, settle, plant)
     steps = []
-    for k, w in enumerate(SPEEDS):
+    n = len(SPEEDS)
+    for i, w in enumerate(SPEEDS):
+        k = i if pass_index == 0 else 2 * n - 1 - i
         now = dict(bow, bow=bow["bow"] * np.exp(-k / bow["relax_steps"]))
         steps.append(sweep(truth, {**physical, "thermal-bow": now}, settle, plant,
                            speeds=(w,)))
@@ -279,6 +289,30 @@ def make_family_trial(kind, seed, family, plant=None):
     oracle = measure(clean, no_noise)
     free = measure(clean_free, dict(no_noise, effects={}))
     return measured[["speed", "t", *CHANNELS]], truth, oracle, free
+
+
+def second_pass_draw(truth):
+    """The second pass's own keyphasor jitter and noise (the plant, its runout and line
+    pickup are the first pass's): drawn from a stream of their own, so the first pass
+    is the trial's measurement bit for bit."""
+    rng = np.random.default_rng([truth["seed"], FAMILIES.index(truth["family"]), 1])
+    return {"jitter_deg": rng.uniform(-2.0, 2.0, len(SPEEDS)).tolist(),
+            "noise_seed": int(rng.integers(2**31))}
+
+
+def make_family_passes(kind, seed, family, plant=None):
+    """The trial's measured sweep (as :func:`make_family_trial`), a second pass of it --
+    the coast-down right after the run-up, every step settled as in the first -- and
+    the truth. Only a time-varying effect (:func:`time_varying`) makes the two passes
+    differ by more than their noise and jitter."""
+    truth = draw_trial(kind, seed, family)
+    physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
+    clean = simulate(family, truth, physical, plant)
+    down = simulate(family, truth, physical, plant, pass_index=1) \
+        if time_varying(physical) else clean
+    cols = ["speed", "t", *CHANNELS]
+    return (measure(clean, truth)[cols],
+            measure(down, dict(truth, **second_pass_draw(truth)))[cols], truth)
 
 
 def feature_gap(measured, predicted, speeds):

@@ -1,0 +1,272 @@
+"""Two passes of one sweep: what a coast-down after the run-up adds to the diagnosis.
+
+Run: ``python benchmarks/bench_gap_passes.py --null 20`` first (the floor), then
+``python benchmarks/bench_gap_passes.py --families second,ross [--shard 0/2]`` (two
+processes on two cores), then ``--report-only`` to write
+``results/bench_gap_passes.json``. Every compared trial is appended to a JSONL log as it
+finishes (``results/gap_passes_<phase>_<family>[.shard<k>of<n>].jsonl``): an interrupted
+run resumes where it stopped; a logged trial is reused only while the code it depends on
+(the pass comparison, the features and the plants) is unchanged.
+
+On one monotone pass a thermal bow relaxing while the speed rises is a smooth 1x change
+over speed, which the nominal update follows: most relaxing bows of the blind runs ended
+``no-gap`` or as a runout (``docs/gap.md``, *Two passes of one sweep*). Here each trial
+of the package rule's runs (``frontier_gap_blind.RUNS``) gets a second pass from its
+own plant (``plants.families.make_family_passes``): the coast-down right after the run-up,
+its own noise and keyphasor jitter, and the bow still relaxing. That pass is compared with
+the trial's logged measurement, model-free (``sknarx.gap.passes.compare_passes``).
+
+* ``--null``: effect-free pairs of passes of the **own** family (seeds from 2000,
+  the null seeds of the blind runs) set the floor: the 99 % quantile of a log-normal
+  fitted to their mean excess per feature, as ``bench_gap_blind.noise_floor`` sets the
+  diagnosis's. It is frozen in ``DiagnosisSettings.pass_floor_per_feature`` before any
+  independent plant is compared.
+* The evaluation, on the **independent plants**: each logged trial's verdict is decided
+  again as ``diagnose(..., second_pass=...)`` decides it. That is the logged verdict
+  unless the passes differ, and then ``unexplained``. Every effect in the library is
+  time-invariant, so a sweep whose passes differ is one no candidate explains. Trials
+  are compared in the order out-of-library, effect-free, singles, pairs, so a short run
+  already answers what the second pass is for. The report gives both verdicts on the
+  same trials: top-1 on visible in-library singles, pairs named, false alarms,
+  ``unexplained`` on visible out-of-library effects. The ranking, and so "pairs in the
+  top two", does not change.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy as np  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from bench_gap_blind import (  # noqa: E402
+    _code_only,
+    detectable,
+    lognormal_quantile,
+    right,
+    truth_label,
+    verdict,
+    visible,
+)
+from plants.families import make_family_passes  # noqa: E402
+from rescore_gap_blind import wilson  # noqa: E402
+
+from sknarx.gap import DiagnosisSettings  # noqa: E402
+from sknarx.gap.passes import compare_passes  # noqa: E402
+
+#: the order trials are compared in: what the second pass is for first
+CATEGORIES = ("out-of-library", "effect-free", "single", "pair")
+#: the package code a pass comparison depends on (with the plants and the own rotor)
+PASS_CODE = ("gap/passes.py", "gap/features.py", "gap/gapmap.py", "gap/measured.py",
+             "orders.py")
+
+
+def code_hash():
+    """Hash of the pass comparison's, the features' and the plants' code (comments and
+    docstrings aside): a change invalidates the logs."""
+    import sknarx
+
+    root = Path(sknarx.__file__).parent
+    files = [root / f for f in PASS_CODE] + sorted((root / "rotor").glob("*.py"))
+    files += sorted((Path(__file__).parent / "plants").glob("*.py"))
+    h = hashlib.sha256()
+    for f in files:
+        h.update(_code_only(f.read_text()).encode())
+    return h.hexdigest()[:16]
+
+
+def compared(kind, seed, family):
+    """One trial's two passes compared: the mean excess per feature, each order's mean
+    z2 and how long the plant and the comparison took."""
+    t = time.perf_counter()
+    try:
+        first, second, truth = make_family_passes(kind, seed, family)
+    except PLANT_FAILURES as exc:  # the plant diverged
+        return {"family": family, "seed": seed, "skipped": str(exc)}
+    c = compare_passes(first, second, settings=DiagnosisSettings())
+    doc = c.to_dict()
+    return {"family": family, "seed": seed, "kind": truth["kind"],
+            "per_feature": c.per_feature, "n_features": doc["n_features"],
+            "by_order": {k: v["mean_z2"] for k, v in doc["by_order"].items()},
+            "largest": doc["largest"][:1], "seconds": time.perf_counter() - t}
+
+
+def logged(phase, family, code):
+    """The logged comparisons of one phase and family under ``code``, by seed."""
+    done = {}
+    for path in sorted(RESULTS.glob(f"gap_passes_{phase}_{family}*.jsonl")):
+        for line in path.read_text().splitlines():
+            r = json.loads(line)
+            if r.get("code") == code:
+                done[r["seed"]] = r
+    return done
+
+
+def run(trials, phase, family, code, shard=(0, 1)):
+    """Compare the ``(kind, seed)`` trials not yet logged (every ``n``-th from the
+    ``k``-th with ``shard``); returns every logged comparison of them, by seed."""
+    k, n = shard
+    log = RESULTS / (f"gap_passes_{phase}_{family}"
+                     + (f".shard{k}of{n}" if n > 1 else "") + ".jsonl")
+    done = logged(phase, family, code)
+    todo = [(i, kind, seed) for i, (kind, seed) in enumerate(trials) if seed not in done]
+    for i, kind, seed in todo:
+        if i % n != k:
+            continue
+        r = {**compared(kind, seed, family), "code": code}
+        with log.open("a") as f:
+            f.write(json.dumps(r, default=float) + "\n")
+        done[seed] = r
+        print(f"  {family} seed {seed} {str(r.get('kind', kind)):28s} "
+              + (f"skipped ({r['skipped']})" if "skipped" in r else
+                 f"{r['per_feature']:9.3f} per feature ({r['seconds']:.0f} s)"), flush=True)
+    return {s: done[s] for _, s in trials if s in done}
+
+
+def category(rec, rule):
+    """Which of :data:`CATEGORIES` a logged trial is scored in (None: an in-library effect
+    under the noise floor, or an out-of-library one, which no verdict can be right on)."""
+    if rec["kind"] == "none":
+        return "effect-free"
+    if not rec["in_library"]:
+        return "out-of-library" if visible(rec, rule) else None
+    if not detectable(rec, rule):
+        return None
+    return "single" if isinstance(truth_label(rec, rule), str) else "pair"
+
+
+def evaluation_trials(family):
+    """The package rule's logged trials of ``family`` as ``(category, record, rule)``,
+    in the order of :data:`CATEGORIES`, then by seed."""
+    from frontier_gap_blind import decided_runs
+
+    out = [(category(rec, rule), rec, rule)
+           for rule, evals in decided_runs(families=(family,)) for rec in evals[family]]
+    out = [t for t in out if t[0] is not None]
+    return sorted(out, key=lambda t: (CATEGORIES.index(t[0]), t[1]["seed"]))
+
+
+def single_pass_ok(cat, rec, rule):
+    """Whether the logged (one-pass) verdict is right for its category."""
+    v = verdict(rec, rule)[0]
+    if cat == "effect-free":
+        return v == "no-gap"
+    if cat == "out-of-library":
+        return v == "unexplained"
+    return right(rec, rule)
+
+
+def two_pass_ok(cat, rec, rule, changed):
+    """The same with the second pass: where the passes differ the verdict is
+    ``unexplained``."""
+    if not changed:
+        return single_pass_ok(cat, rec, rule)
+    return cat == "out-of-library"
+
+
+def score(trials, comparisons, floor):
+    """Per category: trials compared, right with one pass and with two, and the number
+    whose passes differ; and per true kind how many of its passes differed."""
+    out, by_kind = {}, {}
+    for cat, rec, rule in trials:
+        c = comparisons.get(rec["seed"])
+        if c is None or "skipped" in c:
+            continue
+        changed = c["per_feature"] > floor
+        row = out.setdefault(cat, {"n": 0, "one_pass": 0, "two_passes": 0, "changed": 0})
+        row["n"] += 1
+        row["one_pass"] += single_pass_ok(cat, rec, rule)
+        row["two_passes"] += two_pass_ok(cat, rec, rule, changed)
+        row["changed"] += changed
+        kind = json.dumps(rec["kind"])
+        got = by_kind.setdefault(kind, [0, 0])
+        got[0] += changed
+        got[1] += 1
+    for row in out.values():
+        for key in ("one_pass", "two_passes"):
+            row[f"{key}_interval"] = wilson(row[key], row["n"])
+    return out, by_kind
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--null", type=int, default=0,
+                    help="effect-free own-family pairs of passes for the floor (seeds from "
+                         "2000)")
+    ap.add_argument("--families", default="second,ross",
+                    help="independent plants whose logged trials to compare, comma-separated")
+    ap.add_argument("--categories", default=",".join(CATEGORIES),
+                    help=f"which trials, comma-separated (of {', '.join(CATEGORIES)})")
+    ap.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th")
+    ap.add_argument("--report-only", action="store_true",
+                    help="write the report from the logs, comparing nothing")
+    args = ap.parse_args(argv)
+    shard = tuple(int(v) for v in args.shard.split("/"))
+    code = code_hash()
+    floor_frozen = DiagnosisSettings().pass_floor_per_feature
+    null = logged("null", "own", code)
+    if args.null and not args.report_only:
+        print(f"null pairs of passes (own family, effect-free, code {code})", flush=True)
+        null = run([(None, 2000 + i) for i in range(args.null)], "null", "own", code, shard)
+    null_values = [r["per_feature"] for r in null.values() if "skipped" not in r]
+    floor_measured = (lognormal_quantile(null_values, 0.99) if len(null_values) >= 3
+                      else None)
+    if floor_measured is not None:
+        print(f"floor from {len(null_values)} null pairs: {floor_measured:.3f} per feature "
+              f"(median {np.median(null_values):.3f}, largest {max(null_values):.3f}); "
+              f"frozen in the package: {floor_frozen:.3f}", flush=True)
+    cats = [c for c in args.categories.split(",") if c]
+    families = [f for f in args.families.split(",") if f]
+    results = {}
+    for fam in families:
+        trials = [t for t in evaluation_trials(fam) if t[0] in cats]
+        print(f"{fam}: {len(trials)} logged trials ({', '.join(cats)})", flush=True)
+        if args.report_only:
+            comps = logged("eval", fam, code)
+        else:
+            comps = run([(rec["kind"] if rec["kind"] != "none" else None, rec["seed"])
+                         for _, rec, _ in trials], "eval", fam, code, shard)
+        results[fam] = (trials, comps)
+    if shard[1] > 1 and not args.report_only:
+        print("shard done; run with --report-only to write the report")
+        return
+    rows, per_family = [], {}
+    for fam, (trials, comps) in results.items():
+        sc, by_kind = score(trials, comps, floor_frozen)
+        per_family[fam] = {"categories": sc, "changed_by_kind": by_kind,
+                           "n_compared": sum(r["n"] for r in sc.values()),
+                           "n_trials": len(trials),
+                           "median_seconds": float(np.median(
+                               [c["seconds"] for c in comps.values() if "seconds" in c]))
+                           if comps else None}
+        for cat in CATEGORIES:
+            if cat in sc:
+                r = sc[cat]
+                rows.append([fam, cat, r["n"], f"{r['one_pass']}/{r['n']}",
+                             f"{r['two_passes']}/{r['n']}",
+                             "{:.2f}-{:.2f}".format(*r["two_passes_interval"]), r["changed"]])
+    if rows:
+        table(rows, ["family", "category", "compared", "right, one pass", "right, two passes",
+                     "95 % interval", "passes differ"])
+    for fam, d in per_family.items():
+        print(f"{fam}: passes differ by true kind: " + ", ".join(
+            f"{json.loads(k)} {v[0]}/{v[1]}" for k, v in sorted(d["changed_by_kind"].items())))
+    write_json("bench_gap_passes", {
+        "command": "python benchmarks/bench_gap_passes.py " + " ".join(
+            argv if argv is not None else sys.argv[1:]),
+        "code": code, "floor_frozen": floor_frozen,
+        "null": {"n": len(null_values), "per_feature": null_values,
+                 "floor_measured": floor_measured,
+                 "median": float(np.median(null_values)) if null_values else None},
+        "families": per_family,
+        "rule": "a trial's verdict with two passes is its logged verdict unless the passes "
+                "differ (mean excess per feature over the frozen floor), then unexplained"})
+
+
+if __name__ == "__main__":
+    main()
