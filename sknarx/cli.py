@@ -99,8 +99,9 @@ def _gap(args) -> int:
         from .gap.bode_report import write_bode_outputs
         from .gap.orderdomain import diagnose_order_domain
 
-        if args.candidates or args.channels or args.no_update:
-            logger.warning("--candidates, --channels and --no-update apply to time-series "
+        if args.candidates or args.channels or args.no_update or args.second_pass:
+            logger.warning("--candidates, --channels, --no-update and --second-pass apply "
+                           "to time-series "
                            "sweeps; an order-domain (Bode) record is diagnosed against its "
                            "own library")
         result = diagnose_order_domain(args.measured, cfg)
@@ -110,6 +111,13 @@ def _gap(args) -> int:
 
         base = paper_rotor_from_config(cfg)
         measured = load_measured(args.measured)
+        if args.second_pass:
+            try:
+                kw_pass = {"second_pass": load_measured(args.second_pass)}
+            except (ValueError, OSError) as exc:  # the file's fault: say which option
+                raise ValueError(f"--second-pass {args.second_pass}: {exc}") from exc
+        else:
+            kw_pass = {}
         start = time.perf_counter()
 
         def progress(msg):
@@ -125,7 +133,8 @@ def _gap(args) -> int:
             from .gap import DiagnosisSettings
 
             kw["settings"] = replace(DiagnosisSettings(), update_nominal=False)
-        result = diagnose(measured, base=base, channels=args.channels, progress=progress, **kw)
+        result = diagnose(measured, base=base, channels=args.channels, progress=progress,
+                          **kw, **kw_pass)
         narx = None
         if not args.no_narx and result["verdict"] != "no-gap":
             narx = narx_view_of(result, measured, base)
@@ -141,16 +150,20 @@ def _verdict_line(doc) -> str:
     the verdict carries one, the rotor's reading, and for ``unexplained`` the report's
     sentence on the closest candidate (``diagnosis.json``'s ``closest``) below it, and
     the report's sentence on a ranked pair the pair trigger kept from the verdict
-    (``pair_under_trigger``)."""
-    from .gap.report import closest_text, under_trigger_text
+    (``pair_under_trigger``), and with a second pass whether the passes agree
+    (``passes``), in the closest candidate's place where they differ."""
+    from .gap.report import closest_text, passes_text, under_trigger_text
 
     line = (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
             + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
                if doc.get("model_error") else "")
             + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
                if doc.get("rotor_reading") else ""))
-    notes = [t for t in (closest_text(doc).strip(), under_trigger_text(doc).strip()) if t]
-    return "\n".join([line, *notes])
+    changed = (doc.get("passes") or {}).get("changed")
+    # where the passes differ, no time-invariant candidate fell short of a threshold:
+    # the rotor changed, and the passes' sentence says so in the closest candidate's place
+    notes = ["" if changed else closest_text(doc), under_trigger_text(doc), passes_text(doc)]
+    return "\n".join([line, *(t.strip() for t in notes if t.strip())])
 
 
 def _unbalance(args) -> int:
@@ -205,6 +218,11 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"channels to use (default: all DOF columns); from {', '.join(CHANNELS)}")
     g.add_argument("--candidates", nargs="+", choices=EFFECTS, metavar="EFFECT",
                    help=f"effects to search (default: all): {', '.join(EFFECTS)}")
+    g.add_argument("--second-pass", metavar="FILE",
+                   help="a second pass of the same sweep (e.g. the coast-down after the "
+                        "run-up), same format: where it differs from --measured beyond the "
+                        "noise, the rotor changed between the passes and the verdict is "
+                        "unexplained")
     g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
     g.add_argument("--no-update", action="store_true",
                    help="do not update the nominal rotor's parameters before blaming an "

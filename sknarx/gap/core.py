@@ -41,7 +41,7 @@ __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", 
            "pair_search_from", "pair_under_trigger", "preferred", "public_ranking", "rank",
            "recheck_choice", "regions_after",
            "run_parallel", "search", "setting_support", "shortfalls", "shrink",
-           "table_evidence"]
+           "table_evidence", "with_passes"]
 
 logger = logging.getLogger(__name__)
 
@@ -659,6 +659,37 @@ def closest(ranking: list, settings, n_features: int) -> dict | None:
             "heldout_gap_after": float(judged["heldout_gap_after"]),
             "short_of": shortfalls(judged, settings, n_features),
             "min_shrink": settings.min_shrink, "min_log_shrink": settings.min_log_shrink}
+
+
+#: a verdict's entries that describe the fit of the effect it names
+_NAMED_FIT = ("shrink_band", "gap_after", "regions_after", "setting_decided", "model_error",
+              "rotor_reading")
+
+
+def with_passes(result, comparison):
+    """A diagnosis (:class:`~sknarx.gap.GapDiagnosis`) with the test of two passes of its
+    sweep (:class:`~sknarx.gap.passes.PassComparison`; None: ``result`` as it is).
+
+    The document gains ``passes`` (the comparison's ``to_dict``). Where the passes
+    differ, the rotor changed between them. No candidate of the library, each
+    time-invariant, explains that, so the verdict becomes ``unexplained``. What the
+    first pass alone concluded moves to ``passes["one_pass"]``: its verdict and the
+    entries that describe the named effect's fit. Its table after the fit moves too, to
+    ``tables["after_one_pass"]``. The ranking stays: it is the best time-invariant
+    reading of the first pass.
+    """
+    if comparison is None:
+        return result
+    doc = result.document
+    entry = comparison.to_dict()
+    if comparison.changed:
+        entry["one_pass"] = {"verdict": doc["verdict"],
+                             **{k: doc.pop(k) for k in _NAMED_FIT if k in doc}}
+        doc["verdict"] = "unexplained"
+        if "after" in result.tables:
+            result.tables["after_one_pass"] = result.tables.pop("after")
+    doc["passes"] = entry
+    return result
 
 
 def public_ranking(ranking: list) -> list[dict]:

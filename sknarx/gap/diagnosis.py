@@ -65,9 +65,11 @@ from .core import (
     search,
     setting_support,
     table_evidence,
+    with_passes,
 )
 from .features import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from .gapmap import HARMONIC_TOL, circular_components, regions, whirl_pairs
+from .passes import compare_passes
 from .readings import check_readings, reading_contenders
 from .result import GapDiagnosis
 from .settings import DiagnosisSettings
@@ -473,7 +475,8 @@ class _SweepFrontEnd(FrontEnd):
 
 def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
              candidates=LIBRARY, settings: DiagnosisSettings | None = None,
-             progress=None, exhaustive: bool = False, readings=None) -> GapDiagnosis:
+             progress=None, exhaustive: bool = False, readings=None,
+             second_pass: pd.DataFrame | None = None) -> GapDiagnosis:
     """Diagnose a stepped-speed measurement against the nominal simulator.
 
     Parameters
@@ -502,6 +505,15 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         data choose on the held-out speeds (:mod:`sknarx.gap.readings`); the reading of
         the verdict is reported as model error (``rotor_reading``). None: the rotor as
         given only.
+    second_pass : DataFrame, optional
+        A second pass of the same sweep in the same format, e.g. the coast-down after
+        the run-up. It is compared with ``measured`` first, model-free
+        (:func:`sknarx.gap.passes.compare_passes`). Where the two differ beyond their
+        noise floor, the rotor changed between them. No candidate of the library, each
+        time-invariant, explains that, so the verdict is ``unexplained``, and
+        ``passes`` says where the passes differ and what ``measured`` alone concluded
+        (:func:`sknarx.gap.passes.with_passes`). The candidates are fitted to
+        ``measured`` alone.
 
     Returns
     -------
@@ -525,8 +537,18 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
     # solves as well (the features' least squares) fights them for the two cores:
     # measured, one evaluation of 10 speeds 50 ms with one BLAS thread, 100 ms with two
     with threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(measured, base, channels, candidates, settings, progress,
-                         exhaustive, check_readings(readings, base))
+        passes = None
+        if second_pass is not None:
+            # model-free and cheap: a rotor that changed between passes is said so even
+            # where the search then names a time-invariant effect for the first pass
+            passes = compare_passes(measured, second_pass, channels, settings)
+            logger.info("second pass: %.3g per feature against the first (floor %.3g): %s",
+                        passes.per_feature, passes.floor,
+                        "the rotor changed between the passes" if passes.changed
+                        else "the passes agree")
+        return with_passes(_diagnose(measured, base, channels, candidates, settings,
+                                     progress, exhaustive, check_readings(readings, base)),
+                           passes)
 
 
 def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive,

@@ -372,6 +372,75 @@ def _orders_table(doc) -> str:
                            "over its floor"]))
 
 
+def _one_pass_text(doc) -> str:
+    """What the first pass alone concluded, where the passes test overrode it."""
+    one = (doc.get("passes") or {}).get("one_pass")
+    if not one:
+        return ""
+    v = one["verdict"]
+    if v == "no-gap":
+        said = "no-gap: its gap is within the floor, the change is not"
+    elif v == "unexplained":
+        said = "unexplained as well"
+    else:
+        said = (f"{_label(v)}, removing {100 * float(doc['shrink']):.0f} % of its held-out "
+                "gap, a time-invariant reading of one pass of a rotor that changed")
+    return f" The first pass alone: {said}."
+
+
+def passes_text(doc) -> str:
+    """The verdict's sentence on two passes of the sweep (``passes``), empty without
+    them."""
+    p = doc.get("passes")
+    if not p:
+        return ""
+    test = (f"{float(p['per_feature']):.3g} per feature against the floor "
+            f"{float(p['floor_per_feature']):.3g} of effect-free pairs of passes")
+    if not p["changed"]:
+        return f" The two passes of the sweep agree ({test})."
+    top = (p.get("largest") or [None])[0]
+    most = (f", most at {top['feature']} on {top['channel']} at "
+            f"{quantity(top['speed'], 'rad/s')} ({quantity(top['first_m'], 'm')} against "
+            f"{quantity(top['second_m'], 'm')})" if top else "")
+    return (f" The two passes of the sweep differ ({test}{most}): the rotor changed "
+            "between them, by an effect that varies in time (a thermal bow relaxing, a "
+            "crack growing, a joint working loose) or by a response that depends on how "
+            "each speed was reached (a rub or a clearance jumping between branches). No "
+            "candidate of the library, each time-invariant, explains that."
+            + _one_pass_text(doc))
+
+
+def _passes_html(doc) -> str:
+    """The report's section on two passes of the sweep (none without them)."""
+    p = doc.get("passes")
+    if not p:
+        return ""
+    where = table(
+        ([value_range(*r["speed_range"], "rad/s"), r["order"], r["channel"], r["window"],
+          f"{100 * r['share']:.1f} %", quantity(r.get("max_gap_m"), "m")]
+         for r in p["where"][:10]),
+        ["speeds", "order", "channel", "window", "share of the difference",
+         "largest difference"],
+        empty="No speed x order x channel cell differs significantly (z^2 > 9) between "
+              "the passes.")
+    largest = table(
+        ([quantity(r["speed"], "rad/s"), r["feature"], r["channel"], r["window"],
+          quantity(r["first_m"], "m"), quantity(r["second_m"], "m"),
+          quantity(r["difference_m"], "m"), quantity(r["z2"])] for r in p["largest"]),
+        ["speed", "order", "channel", "window", "first pass", "second pass", "difference",
+         "z\u00b2"], empty="")
+    unmatched = p["unmatched_speeds"]
+    left = "; ".join(f"{k} pass only: {', '.join(quantity(w, 'rad/s') for w in v)}"
+                     for k, v in unmatched.items() if v)
+    return (f"<h2>Two passes of the sweep</h2><p>{p['n_steps']} speed steps in both passes, "
+            f"{p['n_features']} features compared model-free: mean excess "
+            f"{float(p['per_feature']):.3g} per feature against the floor "
+            f"{float(p['floor_per_feature']):.3g} (the 99 % level of effect-free pairs of "
+            f"passes): the passes {'differ' if p['changed'] else 'agree'}."
+            + (f" Left out ({html.escape(left)})." if left else "") + "</p>"
+            + where + largest)
+
+
 def _html(doc, figs, prov):
     verdict = doc["verdict"]
     floor = float(doc["settings"]["no_gap_per_feature"])
@@ -399,13 +468,15 @@ def _html(doc, figs, prov):
                     f"effect-free sweeps): the {updated}nominal model explains these data"
                     + (f" ({len(upd['updates'])} parameter(s) updated, listed below)."
                        if upd.get("updates") else "."))
+    elif verdict == "unexplained" and (doc.get("passes") or {}).get("changed"):
+        headline = passes_text(doc).strip()
     elif verdict == "unexplained":
         headline = (f"The held-out gap, {before:.3g} per feature against the no-gap floor "
                     f"{floor:.3g}, is real, but no candidate removes enough of it (best: "
                     f"{100 * float(doc['shrink']):.0f} %): an effect outside the library, or "
                     "a nominal model further from the rig than the nuisance scalars allow."
                     + closest_text(doc) + _orders_text(doc) + _rival_text(doc)
-                    + under_trigger_text(doc))
+                    + under_trigger_text(doc) + passes_text(doc))
     else:
         band = doc.get("shrink_band")
         band_txt = (f" (bootstrap 5-95 %: {100 * band[0]:.0f}-{100 * band[1]:.0f} %)"
@@ -417,7 +488,9 @@ def _html(doc, figs, prov):
                        f"not an effect): {error}." if error else "")
                     + _reading_text(doc)
                     + _orders_text(doc) + _undecided_text(doc) + _rival_text(doc)
-                    + under_trigger_text(doc) + alike_text(verdict))
+                    + under_trigger_text(doc) + alike_text(verdict) + passes_text(doc))
+    if verdict == "no-gap":
+        headline += passes_text(doc)
     unit_note = ("Gap per feature: the held-out excess of squared standardised differences "
                  "(measured minus simulated order vectors over their standard errors) above "
                  f"what noise gives, divided by the {n_feat or 'number of'} held-out features; "
@@ -465,6 +538,7 @@ def _html(doc, figs, prov):
 held out {len(split['heldout_speeds'])}; {len(doc['channels'])} channel(s)
 ({html.escape(', '.join(doc['channels']))}), {quantity(doc['sampling']['fs_hz'], 'Hz')},
 {doc['sampling']['samples_per_step']} samples per step.</p>
+{_passes_html(doc)}
 <h2>Where the model and the data disagree</h2>{where}{_orders_table(doc)}
 <h2>Which effect explains it</h2>{which}
 {imgs}{narx}

@@ -1,0 +1,178 @@
+"""Two passes of one sweep compared model-free (sknarx.gap.passes), and the verdict with them.
+
+The floor is the package's frozen one (set on own-family effect-free pairs of passes,
+``benchmarks/bench_gap_passes.py --null``); the plant tests use the second derivation,
+whose code shares nothing with ``sknarx.rotor``.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from sknarx import cli  # noqa: E402
+from sknarx.gap import DiagnosisSettings, GapDiagnosis, diagnose  # noqa: E402
+from sknarx.gap.core import with_passes  # noqa: E402
+from sknarx.gap.passes import compare_passes  # noqa: E402
+
+SPEEDS = (100.0, 140.0, 180.0, 220.0, 260.0)
+
+
+def one_pass(seed, amplitude=lambda w: 2e-5, shift=0.0, speeds=SPEEDS, noise=1e-7,
+             delay_deg=None):
+    """A settled stepped pass: one channel's 1x of ``amplitude(w)`` (m) with a phase
+    ``shift`` (rad) and white noise; ``delay_deg`` (one per step) offsets each step's
+    keyphasor by that many degrees of shaft angle, as a jittery reference does."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(1000) / 1000.0
+    frames = []
+    for i, w in enumerate(speeds):
+        tt = t - (0.0 if delay_deg is None else np.radians(delay_deg[i]) / w)
+        x = amplitude(w) * np.cos(w * tt + shift) + noise * rng.normal(size=t.size)
+        y = amplitude(w) * np.sin(w * tt + shift) + noise * rng.normal(size=t.size)
+        frames.append(pd.DataFrame({"speed": w, "t": t, "xO1": x, "yO1": y}))
+    return pd.concat(frames, ignore_index=True)
+
+
+def test_passes_of_an_unchanged_rotor_agree_and_a_changed_one_is_found_where_it_changed():
+    same = compare_passes(one_pass(1), one_pass(2))
+    assert not same.changed and same.per_feature < same.floor
+    assert same.floor == DiagnosisSettings().pass_floor_per_feature
+    # a bow of 3 um at the lowest step only (as a bow relaxes, the first step carries most)
+    bowed = one_pass(1, amplitude=lambda w: 2e-5 + (3e-6 if w == SPEEDS[0] else 0.0))
+    diff = compare_passes(bowed, one_pass(2))
+    assert diff.changed
+    doc = diff.to_dict()
+    top = doc["largest"][0]
+    assert top["feature"] == "1x" and top["speed"] == SPEEDS[0]
+    assert top["difference_m"] == pytest.approx(3e-6, rel=0.05)
+    assert doc["where"][0]["speed_range"] == [SPEEDS[0], SPEEDS[0]]
+    assert json.loads(json.dumps(doc)) == doc  # the document's entry is plain JSON
+
+
+def test_a_second_pass_whose_steps_sit_a_little_apart_is_compared_at_its_slope():
+    """A rig's speed control repeats a step to a fraction of a per cent: on a steep flank
+    of a resonance that moves the 1x by much more than the noise, which the first pass's
+    slope over speed times the distance admits. Steps further apart than
+    ``pass_speed_rtol`` are not the same step."""
+    steep = lambda w: 2e-5 * (1.0 + 0.5 * np.sin(w / 15.0))  # noqa: E731
+    moved = tuple(w * 1.003 for w in SPEEDS)
+    got = compare_passes(one_pass(1, steep), one_pass(2, steep, speeds=moved))
+    assert not got.changed
+    assert [b for _, b in got.speed_pairs] == pytest.approx(moved)
+    with pytest.raises(ValueError, match="share no speed step within 0.5 %"):
+        compare_passes(one_pass(1), one_pass(2, speeds=tuple(w * 1.02 for w in SPEEDS)))
+
+
+def test_steps_one_pass_lacks_are_left_out_and_said():
+    got = compare_passes(one_pass(1), one_pass(2, speeds=SPEEDS[1:]))
+    assert got.to_dict()["unmatched_speeds"] == {"first": [SPEEDS[0]], "second": []}
+    assert len(got.speed_pairs) == len(SPEEDS) - 1
+
+
+def test_the_second_pass_errors_name_the_second_pass():
+    bad = one_pass(2).drop(columns=["t"])
+    with pytest.raises(ValueError, match="^The second pass: Measured data lack"):
+        compare_passes(one_pass(1), bad)
+    slow = one_pass(2)
+    slow["t"] = slow["t"] * 2.0
+    with pytest.raises(ValueError, match="sampled at 1000 Hz and 500 Hz"):
+        compare_passes(one_pass(1), slow)
+
+
+@given(jitter=st.lists(st.floats(-2.0, 2.0), min_size=5, max_size=5),
+       shift=st.floats(-np.pi, np.pi), size=st.floats(2e-6, 2e-4))
+def test_keyphasor_jitter_of_a_few_degrees_never_reads_as_a_change(jitter, shift, size):
+    """Invariant: the passes of an unchanged rotor agree whatever its 1x size and phase,
+    with each step's once-per-revolution reference off by up to 2 degrees in each pass
+    (the blind plants' jitter): the reference's offset is removed per step."""
+    first = one_pass(1, lambda w: size, shift)
+    second = one_pass(2, lambda w: size, shift, delay_deg=jitter)
+    assert not compare_passes(first, second).changed
+
+
+def test_a_pass_compared_with_itself_has_no_excess():
+    p = one_pass(3)
+    assert compare_passes(p, p).per_feature == 0.0
+
+
+def _named():
+    doc = {"verdict": "crack", "shrink": 0.8, "shrink_band": [0.7, 0.9],
+           "gap_after": {"heldout_excess": 1.0}, "regions_after": [],
+           "setting_decided": True, "ranking": [{"effect": "crack"}]}
+    return GapDiagnosis(doc, front_end="time-series", tables={"after": pd.DataFrame()})
+
+
+def test_passes_that_differ_make_the_verdict_unexplained_and_keep_what_one_pass_said():
+    bowed = one_pass(1, amplitude=lambda w: 2.5e-5)
+    got = with_passes(_named(), compare_passes(bowed, one_pass(2)))
+    assert got["verdict"] == "unexplained" and got["shrink"] == 0.8
+    one = got["passes"]["one_pass"]
+    assert one["verdict"] == "crack" and one["shrink_band"] == [0.7, 0.9]
+    assert "shrink_band" not in got and "gap_after" not in got
+    assert "after" not in got.tables and "after_one_pass" in got.tables
+    assert got["ranking"] == [{"effect": "crack"}]
+    kept = with_passes(_named(), compare_passes(one_pass(1), one_pass(2)))
+    assert kept["verdict"] == "crack" and "one_pass" not in kept["passes"]
+    assert not kept["passes"]["changed"]
+    assert with_passes(_named(), None)["verdict"] == "crack"
+
+
+def test_the_report_and_the_verdict_line_say_what_the_passes_showed(tmp_path):
+    from sknarx.gap.report import passes_text
+
+    bowed = one_pass(1, amplitude=lambda w: 2.5e-5)
+    doc = dict(with_passes(_named(), compare_passes(bowed, one_pass(2))).document)
+    text = passes_text(doc)
+    assert "the rotor changed between them" in text
+    assert "The first pass alone: crack" in text and "80 %" in text
+    line = cli._verdict_line(doc)
+    assert line.startswith("verdict: unexplained") and "changed between them" in line
+    agree = dict(with_passes(_named(), compare_passes(one_pass(1), one_pass(2))).document)
+    assert "The two passes of the sweep agree" in cli._verdict_line(agree)
+
+
+def test_the_cli_names_a_bad_second_pass_file(tmp_path):
+    from test_cli_errors import assert_one_line_error, run, steps
+
+    measured = steps(tmp_path, columns=("xO1",))
+    res = run("gap", "--measured", str(measured), "--second-pass",
+              str(tmp_path / "missing.csv"), "--out", str(tmp_path / "out"))
+    assert_one_line_error(res, "--second-pass", "missing.csv")
+
+
+@pytest.mark.parametrize("kind, differs", [(None, False), ("crack", False),
+                                           ("thermal-bow", True)])
+def test_on_the_second_plant_only_a_relaxing_bow_makes_its_passes_differ(kind, differs):
+    """The second derivation's coast-down after its run-up (its own noise and keyphasor
+    jitter): an effect-free rotor and a cracked one agree with themselves, a thermal bow
+    still relaxing does not, most at the low speeds' 1x, where the bow is largest."""
+    from plants.families import make_family_passes
+
+    first, second, truth = make_family_passes(kind, 59007, "second")
+    got = compare_passes(first, second)
+    assert got.changed == differs, got.per_feature
+    if differs:
+        assert got.to_dict()["largest"][0]["feature"] == "1x"
+
+
+@pytest.mark.slow
+def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained():
+    """End to end on the second plant's bow 59007: one pass alone is no-gap at these
+    thresholds (the update follows the bow); with the coast-down the verdict is
+    unexplained, and what the first pass said is kept."""
+    from plants.families import make_family_passes
+
+    first, second, _ = make_family_passes("thermal-bow", 59007, "second")
+    fast = DiagnosisSettings(n_probe=8, max_nfev=6, update_spread=False)
+    d = diagnose(first, candidates=("runout",), settings=fast, second_pass=second)
+    assert d["verdict"] == "unexplained"
+    assert d["passes"]["changed"] and "verdict" in d["passes"]["one_pass"]
+    assert d["passes"]["one_pass"]["verdict"] != "unexplained"
