@@ -17,10 +17,11 @@ its own noise and keyphasor jitter, and the bow still relaxing. That pass is com
 the trial's logged measurement, model-free (``sknarx.gap.passes.compare_passes``).
 
 * ``--null``: effect-free pairs of passes of the **own** family (seeds from 2000,
-  the null seeds of the blind runs) set the floor: the 99 % quantile of a log-normal
-  fitted to their mean excess per feature, as ``bench_gap_blind.noise_floor`` sets the
-  diagnosis's. It is frozen in ``DiagnosisSettings.pass_floor_per_feature`` before any
-  independent plant is compared.
+  the null seeds of the blind runs) set the floor of the test's statistic (the shaft
+  orders' summed z2 over its expectation for an unchanged rotor, in standard
+  deviations): the larger of a normal's one-sided 1 % point (2.326) and the 99 % point
+  of a normal fitted to their statistics. It is frozen in
+  ``DiagnosisSettings.pass_floor_sigmas`` before any independent plant is compared.
 * The evaluation, on the **independent plants**: each logged trial's verdict is decided
   again as ``diagnose(..., second_pass=...)`` decides it. That is the logged verdict
   unless the passes differ, and then ``unexplained``. Every effect in the library is
@@ -47,7 +48,6 @@ from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     _code_only,
     detectable,
-    lognormal_quantile,
     right,
     truth_label,
     verdict,
@@ -80,9 +80,25 @@ def code_hash():
     return h.hexdigest()[:16]
 
 
+#: a normal's one-sided 1 % point: the floor for records whose noise is what their
+#: standard errors say
+NORMAL_99 = 2.326
+
+
+def null_floor(values):
+    """The test's floor from effect-free pairs' statistics: the larger of
+    :data:`NORMAL_99` and the 99 % point of a normal fitted to them (None with fewer
+    than three), rounded to three decimals as frozen."""
+    if len(values) < 3:
+        return None
+    fitted = float(np.mean(values) + NORMAL_99 * np.std(values, ddof=1))
+    return round(max(NORMAL_99, fitted), 3)
+
+
 def compared(kind, seed, family):
-    """One trial's two passes compared: the mean excess per feature, each order's mean
-    z2 and how long the plant and the comparison took."""
+    """One trial's two passes compared: the test's statistic, the tested orders' z2 over
+    their expectation, each order's mean z2 and how long the plant and the comparison
+    took."""
     t = time.perf_counter()
     try:
         first, second, truth = make_family_passes(kind, seed, family)
@@ -91,7 +107,8 @@ def compared(kind, seed, family):
     c = compare_passes(first, second, settings=DiagnosisSettings())
     doc = c.to_dict()
     return {"family": family, "seed": seed, "kind": truth["kind"],
-            "per_feature": c.per_feature, "n_features": doc["n_features"],
+            "statistic": c.statistic, "z2_ratio": c.z2_ratio,
+            "n_tested": doc["n_tested"], "n_features": doc["n_features"],
             "by_order": {k: v["mean_z2"] for k, v in doc["by_order"].items()},
             "largest": doc["largest"][:1], "seconds": time.perf_counter() - t}
 
@@ -124,7 +141,8 @@ def run(trials, phase, family, code, shard=(0, 1)):
         done[seed] = r
         print(f"  {family} seed {seed} {str(r.get('kind', kind)):28s} "
               + (f"skipped ({r['skipped']})" if "skipped" in r else
-                 f"{r['per_feature']:9.3f} per feature ({r['seconds']:.0f} s)"), flush=True)
+                 f"{r['statistic']:9.2f} sigmas, z2 x{r['z2_ratio']:.2f} "
+                 f"({r['seconds']:.0f} s)"), flush=True)
     return {s: done[s] for _, s in trials if s in done}
 
 
@@ -177,7 +195,7 @@ def score(trials, comparisons, floor):
         c = comparisons.get(rec["seed"])
         if c is None or "skipped" in c:
             continue
-        changed = c["per_feature"] > floor
+        changed = c["statistic"] > floor
         row = out.setdefault(cat, {"n": 0, "one_pass": 0, "two_passes": 0, "changed": 0})
         row["n"] += 1
         row["one_pass"] += single_pass_ok(cat, rec, rule)
@@ -208,18 +226,18 @@ def main(argv=None):
     args = ap.parse_args(argv)
     shard = tuple(int(v) for v in args.shard.split("/"))
     code = code_hash()
-    floor_frozen = DiagnosisSettings().pass_floor_per_feature
+    floor_frozen = DiagnosisSettings().pass_floor_sigmas
     null = logged("null", "own", code)
     if args.null and not args.report_only:
         print(f"null pairs of passes (own family, effect-free, code {code})", flush=True)
         null = run([(None, 2000 + i) for i in range(args.null)], "null", "own", code, shard)
-    null_values = [r["per_feature"] for r in null.values() if "skipped" not in r]
-    floor_measured = (lognormal_quantile(null_values, 0.99) if len(null_values) >= 3
-                      else None)
+    null_values = [r["statistic"] for r in null.values() if "skipped" not in r]
+    floor_measured = null_floor(null_values)
     if floor_measured is not None:
-        print(f"floor from {len(null_values)} null pairs: {floor_measured:.3f} per feature "
-              f"(median {np.median(null_values):.3f}, largest {max(null_values):.3f}); "
-              f"frozen in the package: {floor_frozen:.3f}", flush=True)
+        print(f"floor from {len(null_values)} null pairs: {floor_measured:.3f} sigmas "
+              f"(their mean {np.mean(null_values):.2f}, sd {np.std(null_values, ddof=1):.2f}, "
+              f"largest {max(null_values):.2f}); frozen in the package: {floor_frozen:.3f}",
+              flush=True)
     cats = [c for c in args.categories.split(",") if c]
     families = [f for f in args.families.split(",") if f]
     results = {}
@@ -260,12 +278,12 @@ def main(argv=None):
         "command": "python benchmarks/bench_gap_passes.py " + " ".join(
             argv if argv is not None else sys.argv[1:]),
         "code": code, "floor_frozen": floor_frozen,
-        "null": {"n": len(null_values), "per_feature": null_values,
+        "null": {"n": len(null_values), "statistic": null_values,
                  "floor_measured": floor_measured,
                  "median": float(np.median(null_values)) if null_values else None},
         "families": per_family,
         "rule": "a trial's verdict with two passes is its logged verdict unless the passes "
-                "differ (mean excess per feature over the frozen floor), then unexplained"})
+                "differ (the statistic over the frozen floor), then unexplained"})
 
 
 if __name__ == "__main__":

@@ -43,8 +43,8 @@ def one_pass(seed, amplitude=lambda w: 2e-5, shift=0.0, speeds=SPEEDS, noise=1e-
 
 def test_passes_of_an_unchanged_rotor_agree_and_a_changed_one_is_found_where_it_changed():
     same = compare_passes(one_pass(1), one_pass(2))
-    assert not same.changed and same.per_feature < same.floor
-    assert same.floor == DiagnosisSettings().pass_floor_per_feature
+    assert not same.changed and same.statistic < same.floor
+    assert same.floor == DiagnosisSettings().pass_floor_sigmas
     # a bow of 3 um at the lowest step only (as a bow relaxes, the first step carries most)
     bowed = one_pass(1, amplitude=lambda w: 2e-5 + (3e-6 if w == SPEEDS[0] else 0.0))
     diff = compare_passes(bowed, one_pass(2))
@@ -100,7 +100,8 @@ def test_keyphasor_jitter_of_a_few_degrees_never_reads_as_a_change(jitter, shift
 
 def test_a_pass_compared_with_itself_has_no_excess():
     p = one_pass(3)
-    assert compare_passes(p, p).per_feature == 0.0
+    got = compare_passes(p, p)
+    assert got.table["z2"].max() < 1e-20 and got.z2_ratio < 1e-20 and not got.changed
 
 
 def _named():
@@ -158,7 +159,7 @@ def test_on_the_second_plant_only_a_relaxing_bow_makes_its_passes_differ(kind, d
 
     first, second, truth = make_family_passes(kind, 59007, "second")
     got = compare_passes(first, second)
-    assert got.changed == differs, got.per_feature
+    assert got.changed == differs, got.statistic
     if differs:
         assert got.to_dict()["largest"][0]["feature"] == "1x"
 

@@ -394,8 +394,9 @@ def passes_text(doc) -> str:
     p = doc.get("passes")
     if not p:
         return ""
-    test = (f"{float(p['per_feature']):.3g} per feature against the floor "
-            f"{float(p['floor_per_feature']):.3g} of effect-free pairs of passes")
+    test = (f"their shaft orders' z\u00b2 {float(p['z2_ratio']):.3g} times what two "
+            f"records of an unchanged rotor give, {float(p['statistic']):.3g} standard "
+            f"deviations against the floor of {float(p['floor_sigmas']):.3g}")
     if not p["changed"]:
         return f" The two passes of the sweep agree ({test})."
     top = (p.get("largest") or [None])[0]
@@ -433,10 +434,13 @@ def _passes_html(doc) -> str:
     left = "; ".join(f"{k} pass only: {', '.join(quantity(w, 'rad/s') for w in v)}"
                      for k, v in unmatched.items() if v)
     return (f"<h2>Two passes of the sweep</h2><p>{p['n_steps']} speed steps in both passes, "
-            f"{p['n_features']} features compared model-free: mean excess "
-            f"{float(p['per_feature']):.3g} per feature against the floor "
-            f"{float(p['floor_per_feature']):.3g} (the 99 % level of effect-free pairs of "
-            f"passes): the passes {'differ' if p['changed'] else 'agree'}."
+            f"{p['n_features']} features compared model-free, the {p['n_tested']} shaft-order "
+            f"vectors (1/3x-3x) tested: their z\u00b2 is {float(p['z2_ratio']):.3g} times "
+            "what two records of an unchanged rotor give, "
+            f"{float(p['statistic']):.3g} standard deviations over it against the floor "
+            f"of {float(p['floor_sigmas']):.3g} (the 99 % level): the passes "
+            f"{'differ' if p['changed'] else 'agree'}. Line energies (one sum over the "
+            "non-synchronous bands) are listed, not tested."
             + (f" Left out ({html.escape(left)})." if left else "") + "</p>"
             + where + largest)
 

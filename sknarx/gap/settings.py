@@ -143,10 +143,11 @@ class DiagnosisSettings:
     # reading is the whole search over these, so its cost grows with them
     reading_contenders: int = 2
     # two passes of one sweep (a run-up and its coast-down, sknarx.gap.passes) differ
-    # when the mean excess per feature of one against the other exceeds this: the 99 %
-    # quantile (log-normal) of effect-free pairs of passes of the own family, measured and
-    # frozen like no_gap_per_feature (benchmarks/bench_gap_passes.py --null)
-    pass_floor_per_feature: float = 0.365
+    # when their shaft orders' summed z2 exceeds its expectation for an unchanged rotor
+    # by this many standard deviations: the larger of a normal's one-sided 1 % point and
+    # the 99 % point of a normal fitted to effect-free pairs of passes of the own family,
+    # measured and frozen like no_gap_per_feature (benchmarks/bench_gap_passes.py --null)
+    pass_floor_sigmas: float = 2.326
     # ... whose steps are the same step where their speeds agree to this share
     pass_speed_rtol: float = 0.005
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
