@@ -325,7 +325,18 @@ def chosen(rec, s, rule=None):
     return decide(rec["e0"], ranking, s, rec["n_features"], orders_over(rec, s))
 
 
+def passes_differ(rec, s):
+    """Whether a trial measured in two passes (its ``passes``: the statistic of
+    :func:`sknarx.gap.passes.compare_passes`) shows a rotor that changed between them,
+    by the rule's ``pass_floor_sigmas``; False for a trial of one pass."""
+    p = rec.get("passes")
+    return p is not None and p["statistic"] > s.pass_floor_sigmas
+
+
 def verdict(rec, s, rule=None):
+    if passes_differ(rec, s):
+        # no time-invariant candidate explains it (sknarx.gap.core.with_passes)
+        return "unexplained", 0.0
     choice = chosen(rec, s, rule)
     if choice == "no-gap":
         return "no-gap", 0.0

@@ -40,6 +40,7 @@ import hashlib
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -48,13 +49,13 @@ from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     _code_only,
     detectable,
-    right,
+    passes_differ,
+    score,
     truth_label,
-    verdict,
     visible,
 )
 from plants.families import make_family_passes  # noqa: E402
-from rescore_gap_blind import wilson  # noqa: E402
+from rescore_gap_blind import intervals, wilson  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 from sknarx.gap.passes import compare_passes  # noqa: E402
@@ -169,46 +170,38 @@ def evaluation_trials(family):
     return sorted(out, key=lambda t: (CATEGORIES.index(t[0]), t[1]["seed"]))
 
 
-def single_pass_ok(cat, rec, rule):
-    """Whether the logged (one-pass) verdict is right for its category."""
-    v = verdict(rec, rule)[0]
-    if cat == "effect-free":
-        return v == "no-gap"
-    if cat == "out-of-library":
-        return v == "unexplained"
-    return right(rec, rule)
+#: the blind benchmark's rates the report pools (bench_gap_blind.score)
+RATES = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
+         "unexplained_out_of_library", "names_present")
 
 
-def two_pass_ok(cat, rec, rule, changed):
-    """The same with the second pass: where the passes differ the verdict is
-    ``unexplained``."""
-    if not changed:
-        return single_pass_ok(cat, rec, rule)
-    return cat == "out-of-library"
-
-
-def score(trials, comparisons, floor):
-    """Per category: trials compared, right with one pass and with two, and the number
-    whose passes differ; and per true kind how many of its passes differed."""
-    out, by_kind = {}, {}
-    for cat, rec, rule in trials:
+def rates(trials, comparisons, floor):
+    """The blind benchmark's rates (:func:`bench_gap_blind.score`, each run decided by its
+    own rule) pooled over the runs, on the trials compared: with one pass (the logged
+    verdict) and with two (the comparison's statistic as the trial's ``passes``, decided
+    at ``floor``), each ``[k, n]``; and per true kind how many trials' passes differed."""
+    runs, changed = {}, {}
+    for _, rec, rule in trials:
         c = comparisons.get(rec["seed"])
         if c is None or "skipped" in c:
             continue
-        changed = c["statistic"] > floor
-        row = out.setdefault(cat, {"n": 0, "one_pass": 0, "two_passes": 0, "changed": 0})
-        row["n"] += 1
-        row["one_pass"] += single_pass_ok(cat, rec, rule)
-        row["two_passes"] += two_pass_ok(cat, rec, rule, changed)
-        row["changed"] += changed
-        kind = json.dumps(rec["kind"])
-        got = by_kind.setdefault(kind, [0, 0])
-        got[0] += changed
+        rule = replace(rule, pass_floor_sigmas=floor)
+        # runs decided by one rule pool into one score (every rate is a count)
+        one, two = runs.setdefault(rule, ([], []))
+        two.append({**rec, "passes": {"statistic": c["statistic"]}})
+        one.append(rec)
+        got = changed.setdefault(json.dumps(rec["kind"]), [0, 0])
+        got[0] += passes_differ(two[-1], rule)
         got[1] += 1
-    for row in out.values():
-        for key in ("one_pass", "two_passes"):
-            row[f"{key}_interval"] = wilson(row[key], row["n"])
-    return out, by_kind
+    out = {"one_pass": {}, "two_passes": {}}
+    for rule, (one, two) in runs.items():
+        for key, recs in (("one_pass", one), ("two_passes", two)):
+            for name, k, n, *_ in intervals(score(recs, rule)):
+                if name in RATES:
+                    got = out[key].setdefault(name, [0, 0])
+                    got[0] += k
+                    got[1] += n
+    return out, changed
 
 
 def main(argv=None):
@@ -255,22 +248,21 @@ def main(argv=None):
         return
     rows, per_family = [], {}
     for fam, (trials, comps) in results.items():
-        sc, by_kind = score(trials, comps, floor_frozen)
-        per_family[fam] = {"categories": sc, "changed_by_kind": by_kind,
-                           "n_compared": sum(r["n"] for r in sc.values()),
+        pooled, by_kind = rates(trials, comps, floor_frozen)
+        per_family[fam] = {**pooled, "changed_by_kind": by_kind,
+                           "n_compared": sum(v[1] for v in by_kind.values()),
                            "n_trials": len(trials),
                            "median_seconds": float(np.median(
                                [c["seconds"] for c in comps.values() if "seconds" in c]))
                            if comps else None}
-        for cat in CATEGORIES:
-            if cat in sc:
-                r = sc[cat]
-                rows.append([fam, cat, r["n"], f"{r['one_pass']}/{r['n']}",
-                             f"{r['two_passes']}/{r['n']}",
-                             "{:.2f}-{:.2f}".format(*r["two_passes_interval"]), r["changed"]])
+        for name in RATES:
+            if name in pooled["two_passes"]:
+                # the trials a rate counts can differ (names_present: the named verdicts)
+                (k1, n1), (k2, n2) = pooled["one_pass"][name], pooled["two_passes"][name]
+                rows.append([fam, name, f"{k1}/{n1}", f"{k2}/{n2}",
+                             "{:.2f}-{:.2f}".format(*wilson(k2, n2))])
     if rows:
-        table(rows, ["family", "category", "compared", "right, one pass", "right, two passes",
-                     "95 % interval", "passes differ"])
+        table(rows, ["family", "rate", "one pass", "two passes", "two passes, 95 % interval"])
     for fam, d in per_family.items():
         print(f"{fam}: passes differ by true kind: " + ", ".join(
             f"{json.loads(k)} {v[0]}/{v[1]}" for k, v in sorted(d["changed_by_kind"].items())))

@@ -177,3 +177,40 @@ def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained():
     assert d["verdict"] == "unexplained"
     assert d["passes"]["changed"] and "verdict" in d["passes"]["one_pass"]
     assert d["passes"]["one_pass"]["verdict"] != "unexplained"
+
+
+def test_a_logged_trial_measured_in_two_passes_is_decided_as_diagnose_decides_it():
+    """The blind benchmark's scoring reads a trial's pass statistic as ``diagnose`` does:
+    over the floor the verdict is unexplained, whatever the ranking; under it, or
+    without a second pass, the ranking decides."""
+    from bench_gap_blind import passes_differ, verdict
+
+    s = DiagnosisSettings()
+    rec = {"kind": "runout", "e0": 5.0, "n_features": 100, "ranking": []}
+    assert not passes_differ(rec, s)
+    over = {**rec, "passes": {"statistic": s.pass_floor_sigmas + 0.1}}
+    under = {**rec, "passes": {"statistic": s.pass_floor_sigmas - 0.1}}
+    assert passes_differ(over, s) and verdict(over, s)[0] == "unexplained"
+    assert not passes_differ(under, s)
+    assert verdict(under, s) == verdict(rec, s)
+
+
+@pytest.mark.slow
+def test_the_second_plants_logged_trials_with_their_coast_down_give_the_record():
+    """``bench_gap_passes.py --families second --report-only`` from the committed logs:
+    every relaxing bow's passes differ and no other trial's do, so out-of-library rises
+    from 49/65 to 62/65 and nothing else moves (docs/gap.md, *Two passes of one sweep*)."""
+    import bench_gap_passes as bench
+
+    trials = bench.evaluation_trials("second")
+    comps = bench.logged("eval", "second", bench.code_hash())
+    assert len(comps) == len(trials) == 315
+    pooled, by_kind = bench.rates(trials, comps, DiagnosisSettings().pass_floor_sigmas)
+    assert by_kind['"thermal-bow"'] == [20, 20]
+    assert sum(v[0] for k, v in by_kind.items() if k != '"thermal-bow"') == 0
+    one, two = pooled["one_pass"], pooled["two_passes"]
+    assert one["unexplained_out_of_library"] == [49, 65]
+    assert two["unexplained_out_of_library"] == [62, 65]
+    for rate in ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm"):
+        assert one[rate] == two[rate], rate
+    assert one["top1"] == [137, 160] and two["false_alarm"] == [0, 45]
