@@ -5,7 +5,10 @@ Run: ``python benchmarks/bench_gap_blind.py [--families own,second,ross] [--null
 two processes, then once without ``--shard`` (or with ``--report-only``) to write
 ``benchmarks/results/bench_gap_blind.json``. Every trial is appended to a JSONL log
 as it finishes: an interrupted run resumes where it stopped (a logged trial is reused
-only while the diagnosis code and search settings are unchanged).
+only while the diagnosis code and search settings are unchanged). ``--second-pass``
+measures every evaluation trial in two passes, the coast-down after the run-up, and
+diagnoses with both (``diagnose(..., second_pass=...)``, logged as ``passes``; scored by
+:func:`passes_differ`).
 
 Trials come from ``plants.families`` (the same draw for every family: an effect or
 none, a pair, or one outside the library -- line pickup, a thermal bow relaxing over
@@ -153,17 +156,23 @@ def plan(n, seed0, family):
     return [(k, seed0 + i) for i, k in enumerate(kinds[:n])]
 
 
-def run_trial(kind, seed, family, settings, exhaustive=True, readings=None):
+def run_trial(kind, seed, family, settings, exhaustive=True, readings=None,
+              second_pass=False):
+    """One trial diagnosed; with ``second_pass``, measured in two passes (the coast-down
+    after the run-up, ``plants.families.make_family_passes``) and diagnosed with both,
+    the passes' test logged as ``passes``."""
     t = time.perf_counter()
     try:
-        measured, truth, oracle, free = make_family_trial(kind, seed, family)
+        measured, truth, oracle, free, *down = make_family_trial(
+            kind, seed, family, second_pass=second_pass)
     except PLANT_FAILURES as exc:  # the plant diverged
         return {"kind": kind, "seed": seed, "family": family, "skipped": str(exc)}
     t_plant = time.perf_counter() - t
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        d = diagnose(measured, settings=settings, exhaustive=exhaustive, readings=readings)
+        d = diagnose(measured, settings=settings, exhaustive=exhaustive, readings=readings,
+                     second_pass=down[0] if down else None)
     elapsed = time.perf_counter() - t
     held = d["split"]["heldout_speeds"]
     E0 = d["gap_before"]["heldout_excess"]
@@ -200,6 +209,10 @@ def run_trial(kind, seed, family, settings, exhaustive=True, readings=None):
                            "mismatch_1x": upd.get("mismatch_1x")},
         "records_settled": not d["records"]["starts_with_transient"],
         "seconds": elapsed, "plant_seconds": t_plant,
+        # the passes' test, decided again at any floor by passes_differ (the ranking is
+        # the first pass's, as without a second)
+        **({"passes": {k: d["passes"][k] for k in ("statistic", "z2_ratio", "changed",
+                                                   "largest")}} if "passes" in d else {}),
     }
 
 
@@ -585,13 +598,16 @@ def fit_thresholds(pilot, base):
 
 
 def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaustive=True,
-        readings=None):
+        readings=None, second_pass=False):
     """Run (or reload) the (kind, seed) ``trials`` of one phase and family (``readings``:
-    the diagnosis's alternative readings of the rotor, part of the log key)."""
+    the diagnosis's alternative readings of the rotor; ``second_pass``: each trial
+    measured in two passes; both part of the log key)."""
     commit = git_commit()
     code = code_hash() + str([getattr(settings, f) for f in SEARCH_FIELDS])
     if readings:
         code += str(readings)
+    if second_pass:
+        code += "+second-pass"
     k, n_shards = shard
     suffix = f".shard{k}of{n_shards}" if n_shards > 1 else ""
     log = RESULTS / f"gap_blind_{phase}_{family}{suffix}.jsonl"
@@ -613,7 +629,7 @@ def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaus
             continue
         if i % n_shards != k or report_only:
             continue
-        r = run_trial(kind, seed, family, settings, exhaustive, readings)
+        r = run_trial(kind, seed, family, settings, exhaustive, readings, second_pass)
         r["commit"], r["code"] = commit, code
         with log.open("a") as f:
             f.write(json.dumps(r, default=float) + "\n")
@@ -691,6 +707,10 @@ def main():
                     help="an alternative reading of the rotor the evaluation trials are "
                          "diagnosed with (diagnose's readings; repeatable), e.g. "
                          "'tilt:tilt_share_O=1'; the null trials set the floor without it")
+    ap.add_argument("--second-pass", action="store_true",
+                    help="measure every evaluation trial in two passes (the coast-down "
+                         "after the run-up) and diagnose with both (diagnose's "
+                         "second_pass); the null and pilot trials stay one pass")
     args = ap.parse_args()
     readings = parse_readings(ap, args.reading)
     shard = tuple(int(v) for v in args.shard.split("/"))
@@ -708,7 +728,7 @@ def main():
     for fam in families:
         print(f"evaluation trials ({fam})", flush=True)
         evals[fam] = run(plan(args.trials, args.eval_seed, fam), "eval", fam, base, shard,
-                         args.report_only, readings=readings)
+                         args.report_only, readings=readings, second_pass=args.second_pass)
     if shard[1] > 1:
         print("shard done; run without --shard to write the report")
         return

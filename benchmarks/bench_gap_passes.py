@@ -3,7 +3,8 @@
 Run: ``python benchmarks/bench_gap_passes.py --null 20`` first (the floor), then
 ``python benchmarks/bench_gap_passes.py --families second,ross [--shard 0/2]`` (two
 processes on two cores), then ``--report-only`` to write
-``results/bench_gap_passes.json``. Every compared trial is appended to a JSONL log as it
+``results/bench_gap_passes.json`` (``--report-only --code HASH``: from the logs of a
+report's code after the code changed). Every compared trial is appended to a JSONL log as it
 finishes (``results/gap_passes_<phase>_<family>[.shard<k>of<n>].jsonl``): an interrupted
 run resumes where it stopped; a logged trial is reused only while the code it depends on
 (the pass comparison, the features and the plants) is unchanged.
@@ -216,9 +217,15 @@ def main(argv=None):
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th")
     ap.add_argument("--report-only", action="store_true",
                     help="write the report from the logs, comparing nothing")
+    ap.add_argument("--code", default=None,
+                    help="with --report-only: the logs of this code hash (a report's "
+                         "'code'), written before the code changed; default: the code as "
+                         "it is")
     args = ap.parse_args(argv)
     shard = tuple(int(v) for v in args.shard.split("/"))
-    code = code_hash()
+    if args.code and not args.report_only:
+        ap.error("--code reads old logs: it goes with --report-only")
+    code = args.code or code_hash()
     floor_frozen = DiagnosisSettings().pass_floor_sigmas
     null = logged("null", "own", code)
     if args.null and not args.report_only:

@@ -202,8 +202,9 @@ def test_the_second_plants_logged_trials_with_their_coast_down_give_the_record()
     from 49/65 to 62/65 and nothing else moves (docs/gap.md, *Two passes of one sweep*)."""
     import bench_gap_passes as bench
 
+    report = json.loads((bench.RESULTS / "bench_gap_passes.json").read_text())
     trials = bench.evaluation_trials("second")
-    comps = bench.logged("eval", "second", bench.code_hash())
+    comps = bench.logged("eval", "second", report["code"])
     assert len(comps) == len(trials) == 315
     pooled, by_kind = bench.rates(trials, comps, DiagnosisSettings().pass_floor_sigmas)
     assert by_kind['"thermal-bow"'] == [20, 20]
@@ -214,3 +215,31 @@ def test_the_second_plants_logged_trials_with_their_coast_down_give_the_record()
     for rate in ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm"):
         assert one[rate] == two[rate], rate
     assert one["top1"] == [137, 160] and two["false_alarm"] == [0, 45]
+
+
+def test_a_blind_trial_in_two_passes_diagnoses_with_both_and_logs_the_test(monkeypatch):
+    """bench_gap_blind --second-pass: the trial's first pass is the one-pass trial's
+    measurement, the second its plant's coast-down, both go to diagnose, and the passes'
+    test is logged where the scoring reads it (diagnose stubbed: its own test is above)."""
+    import bench_gap_blind as blind
+    from plants.families import make_family_passes
+
+    seen = {}
+
+    def fake_diagnose(measured, second_pass=None, **kw):
+        seen["first"], seen["second"] = measured, second_pass
+        doc = {"gap_before": {"heldout_excess": 9.0, "per_feature": 0.09},
+               "split": {"heldout_speeds": [103.3111]}, "n_heldout_features": 100,
+               "ranking": [], "nominal_update": None, "records": {
+                   "starts_with_transient": False},
+               "passes": compare_passes(measured, second_pass).to_dict()}
+        tables = {"before": pd.DataFrame({"feature": ["1x"], "excess": [0.0], "z2": [1.0]})}
+        return GapDiagnosis(doc, front_end="time-series", tables=tables)
+
+    monkeypatch.setattr(blind, "diagnose", fake_diagnose)
+    rec = blind.run_trial("thermal-bow", 59007, "second", DiagnosisSettings(),
+                          second_pass=True)
+    first, second, _ = make_family_passes("thermal-bow", 59007, "second")
+    pd.testing.assert_frame_equal(seen["first"], first)
+    pd.testing.assert_frame_equal(seen["second"], second)
+    assert rec["passes"]["changed"] and blind.passes_differ(rec, DiagnosisSettings())

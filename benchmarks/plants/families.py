@@ -270,8 +270,10 @@ def measure(clean, truth):
     return out
 
 
-def make_family_trial(kind, seed, family, plant=None):
-    """Measured sweep, truth, and the clean sweeps with and without the effects.
+def make_family_trial(kind, seed, family, plant=None, second_pass=False):
+    """Measured sweep, truth, and the clean sweeps with and without the effects; with
+    ``second_pass``, the measured coast-down after it too (:func:`make_family_passes`),
+    fifth.
 
     ``plant``: fields of the family's plant to change (``own``: ``RotorParameters``;
     ``second``: ``SecondRotor``; ``ross``: ``PaperRotorROSS``, e.g. its
@@ -288,7 +290,8 @@ def make_family_trial(kind, seed, family, plant=None):
     no_noise = dict(truth, snr_db=400.0, jitter_deg=truth["jitter_deg"])
     oracle = measure(clean, no_noise)
     free = measure(clean_free, dict(no_noise, effects={}))
-    return measured[["speed", "t", *CHANNELS]], truth, oracle, free
+    out = (measured[["speed", "t", *CHANNELS]], truth, oracle, free)
+    return (*out, _second_pass(family, truth, physical, clean, plant)) if second_pass else out
 
 
 def second_pass_draw(truth):
@@ -308,11 +311,16 @@ def make_family_passes(kind, seed, family, plant=None):
     truth = draw_trial(kind, seed, family)
     physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
     clean = simulate(family, truth, physical, plant)
+    return (measure(clean, truth)[["speed", "t", *CHANNELS]],
+            _second_pass(family, truth, physical, clean, plant), truth)
+
+
+def _second_pass(family, truth, physical, clean, plant=None):
+    """The measured coast-down of a trial whose run-up's clean sweep is ``clean``: the
+    same sweep where nothing varies in time, else simulated on (see :func:`simulate`)."""
     down = simulate(family, truth, physical, plant, pass_index=1) \
         if time_varying(physical) else clean
-    cols = ["speed", "t", *CHANNELS]
-    return (measure(clean, truth)[cols],
-            measure(down, dict(truth, **second_pass_draw(truth)))[cols], truth)
+    return measure(down, dict(truth, **second_pass_draw(truth)))[["speed", "t", *CHANNELS]]
 
 
 def feature_gap(measured, predicted, speeds):
