@@ -165,11 +165,14 @@ def test_on_the_second_plant_only_a_relaxing_bow_makes_its_passes_differ(kind, d
 
 
 @pytest.mark.slow
-def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained():
-    """End to end on the second plant's bow 59007: one pass alone is no-gap at these
-    thresholds (the update follows the bow); with the coast-down the verdict is
-    unexplained, and what the first pass said is kept."""
+def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained(tmp_path):
+    """End to end on the second plant's bow 59007: one pass alone names something or
+    nothing (the update follows the bow); with the coast-down the verdict is
+    unexplained, what the first pass said is kept, and the report says where the
+    passes differ."""
     from plants.families import make_family_passes
+
+    from sknarx.gap.report import write_gap_outputs
 
     first, second, _ = make_family_passes("thermal-bow", 59007, "second")
     fast = DiagnosisSettings(n_probe=8, max_nfev=6, update_spread=False)
@@ -177,6 +180,11 @@ def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained():
     assert d["verdict"] == "unexplained"
     assert d["passes"]["changed"] and "verdict" in d["passes"]["one_pass"]
     assert d["passes"]["one_pass"]["verdict"] != "unexplained"
+    doc = write_gap_outputs(d, tmp_path, "sknarx gap (test)")
+    written = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert written["passes"]["one_pass"] == doc["passes"]["one_pass"]
+    html = (tmp_path / "report.html").read_text()
+    assert "Two passes of the sweep" in html and "the rotor changed between them" in html
 
 
 def test_a_logged_trial_measured_in_two_passes_is_decided_as_diagnose_decides_it():

@@ -512,7 +512,7 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         noise floor, the rotor changed between them. No candidate of the library, each
         time-invariant, explains that, so the verdict is ``unexplained``, and
         ``passes`` says where the passes differ and what ``measured`` alone concluded
-        (:func:`sknarx.gap.passes.with_passes`). The candidates are fitted to
+        (:func:`sknarx.gap.core.with_passes`). The candidates are fitted to
         ``measured`` alone.
 
     Returns

@@ -228,9 +228,10 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     Sc = s["re"].to_numpy() + 1j * s["im"].to_numpy()
     order_k, speed_idx, group_idx = feature_layout(m.index)
     tol = model_tol(m)
-    d, M, noise_share = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k,
-                       speed_idx, group_idx, tol, rtol, max_offset_deg,
-                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol)
+    d, M, noise_share = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(),
+                                    order_k, speed_idx, group_idx, tol, rtol,
+                                    max_offset_deg, whirl_layout(m.index, whirl_tol(m)),
+                                    harmonic_rtol)
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)

@@ -89,7 +89,7 @@ class PassComparison:
     @property
     def tested(self) -> pd.DataFrame:
         """The rows of :attr:`table` the test reads: the shaft orders."""
-        return self.table[~self.table["feature"].map(is_nonsync).to_numpy(dtype=bool)]
+        return _tested(self.table)
 
     @property
     def z2_ratio(self) -> float:
@@ -123,12 +123,17 @@ class PassComparison:
         }
 
 
+def _tested(table: pd.DataFrame) -> pd.DataFrame:
+    """The shaft orders' rows of a comparison table (the line energies left out)."""
+    return table[~table["feature"].map(is_nonsync).to_numpy(dtype=bool)]
+
+
 def sigmas_over_noise(table: pd.DataFrame) -> float:
     """The shaft orders' summed ``z2`` of a comparison table over its expectation where
     the two sides agree, in standard deviations: each vector's ``z2`` is then its
     ``noise_share`` times a chi-square with two degrees of freedom (mean ``2 s``,
     variance ``4 s^2``); 0 without a vector that noise can move."""
-    t = table[~table["feature"].map(is_nonsync).to_numpy(dtype=bool)]
+    t = _tested(table)
     s = t["noise_share"].to_numpy()
     sd = 2.0 * np.sqrt(np.sum(s**2))
     return float((t["z2"].sum() - 2.0 * s.sum()) / sd) if sd > 0 else 0.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import json
 from pathlib import Path
+from statistics import NormalDist
 
 import numpy as np
 
@@ -438,7 +439,8 @@ def _passes_html(doc) -> str:
             f"vectors (1/3x-3x) tested: their z\u00b2 is {float(p['z2_ratio']):.3g} times "
             "what two records of an unchanged rotor give, "
             f"{float(p['statistic']):.3g} standard deviations over it against the floor "
-            f"of {float(p['floor_sigmas']):.3g} (the 99 % level): the passes "
+            f"of {float(p['floor_sigmas']):.3g} (a normal's "
+            f"{100 * NormalDist().cdf(float(p['floor_sigmas'])):.0f} % point): the passes "
             f"{'differ' if p['changed'] else 'agree'}. Line energies (one sum over the "
             "non-synchronous bands) are listed, not tested."
             + (f" Left out ({html.escape(left)})." if left else "") + "</p>"
