@@ -260,3 +260,23 @@ def test_a_blind_trial_in_two_passes_diagnoses_with_both_and_logs_the_test(monke
     pd.testing.assert_frame_equal(seen["first"], first)
     pd.testing.assert_frame_equal(seen["second"], second)
     assert rec["passes"]["changed"] and blind.passes_differ(rec, DiagnosisSettings())
+
+
+@pytest.mark.slow
+def test_sknarx_gap_with_a_second_pass_file_end_to_end(tmp_path):
+    """As a user runs it: the run-up and the coast-down as two CSV files; the verdict
+    line says the passes differ, and diagnosis.json carries them."""
+    from plants.families import make_family_passes
+    from test_cli_errors import run
+
+    up, down, _ = make_family_passes("thermal-bow", 59007, "second")
+    up.to_csv(tmp_path / "up.csv", index=False)
+    down.to_csv(tmp_path / "down.csv", index=False)
+    res = run("gap", "--measured", str(tmp_path / "up.csv"), "--second-pass",
+              str(tmp_path / "down.csv"), "--candidates", "runout", "--no-narx", "--quiet",
+              "--out", str(tmp_path / "out"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.startswith("verdict: unexplained")
+    assert "The two passes of the sweep differ" in res.stdout
+    doc = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+    assert doc["passes"]["changed"] and doc["passes"]["one_pass"]["verdict"] == "no-gap"
