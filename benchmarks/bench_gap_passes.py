@@ -4,10 +4,12 @@ Run: ``python benchmarks/bench_gap_passes.py --null 20`` first (the floor), then
 ``python benchmarks/bench_gap_passes.py --families second,ross [--shard 0/2]`` (two
 processes on two cores), then ``--report-only`` to write
 ``results/bench_gap_passes.json`` (``--report-only --code HASH``: from the logs of a
-report's code after the code changed). Every compared trial is appended to a JSONL log as it
-finishes (``results/gap_passes_<phase>_<family>[.shard<k>of<n>].jsonl``): an interrupted
-run resumes where it stopped; a logged trial is reused only while the code it depends on
-(the pass comparison, the features and the plants) is unchanged.
+report's code after the code changed). ``--bow-limit FIRST:LAST`` measures instead how
+small a relaxing bow the test still sees (fresh bow draws, each bow scaled). Every
+compared trial is appended to a JSONL log as it finishes
+(``results/gap_passes_<phase>_<family>[.shard<k>of<n>].jsonl``): an interrupted run
+resumes where it stopped; a logged trial is reused only while the code it depends on (the
+pass comparison, the features and the plants) is unchanged.
 
 On one monotone pass a thermal bow relaxing while the speed rises is a smooth 1x change
 over speed, which the nominal update follows: most relaxing bows of the blind runs ended
@@ -115,6 +117,40 @@ def compared(kind, seed, family):
             "largest": doc["largest"][:1], "seconds": time.perf_counter() - t}
 
 
+def bow_limit(family, seeds, scales):
+    """How small a relaxing bow the test still sees: each of ``family``'s thermal-bow
+    draws at ``seeds`` with its bow scaled by each of ``scales``, both passes simulated
+    (the first as the trial's, the second its coast-down); per scale the bows (m) and
+    the statistics."""
+    from plants.families import (
+        CHANNELS,
+        MEASUREMENT,
+        draw_trial,
+        measure,
+        second_pass_draw,
+        simulate,
+    )
+
+    out = {scale: {"bow_m": [], "statistic": []} for scale in scales}
+    for seed in seeds:
+        truth = draw_trial("thermal-bow", seed, family)
+        for scale in scales:
+            bow = dict(truth["effects"]["thermal-bow"])
+            bow["bow"] *= scale
+            t = dict(truth, effects={**truth["effects"], "thermal-bow": bow})
+            physical = {n: p for n, p in t["effects"].items() if n not in MEASUREMENT}
+            cols = ["speed", "t", *CHANNELS]
+            first = measure(simulate(family, t, physical), t)[cols]
+            second = measure(simulate(family, t, physical, pass_index=1),
+                             dict(t, **second_pass_draw(t)))[cols]
+            stat = compare_passes(first, second, settings=DiagnosisSettings()).statistic
+            out[scale]["bow_m"].append(bow["bow"])
+            out[scale]["statistic"].append(stat)
+            print(f"  {family} seed {seed} bow x{scale:g} ({1e6 * bow['bow']:.1f} um): "
+                  f"{stat:.1f} sigmas", flush=True)
+    return out
+
+
 def logged(phase, family, code):
     """The logged comparisons of one phase and family under ``code``, by seed."""
     done = {}
@@ -217,6 +253,13 @@ def main(argv=None):
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th")
     ap.add_argument("--report-only", action="store_true",
                     help="write the report from the logs, comparing nothing")
+    ap.add_argument("--bow-limit", metavar="SEEDS", default=None,
+                    help="instead: how small a relaxing bow the test still sees, on "
+                         "--families' fresh thermal-bow draws at seeds FIRST:LAST, each "
+                         "bow scaled by --bow-scales (writes results/gap_passes_bow_limit"
+                         ".json)")
+    ap.add_argument("--bow-scales", default="1,0.3,0.1,0.03,0.01",
+                    help="with --bow-limit: the scales, comma-separated")
     ap.add_argument("--code", default=None,
                     help="with --report-only: the logs of this code hash (a report's "
                          "'code'), written before the code changed; default: the code as "
@@ -226,6 +269,26 @@ def main(argv=None):
     if args.code and not args.report_only:
         ap.error("--code reads old logs: it goes with --report-only")
     code = args.code or code_hash()
+    if args.bow_limit:
+        first, last = (int(v) for v in args.bow_limit.split(":"))
+        scales = [float(v) for v in args.bow_scales.split(",")]
+        floor = DiagnosisSettings().pass_floor_sigmas
+        found, rows = {}, []
+        for fam in [f for f in args.families.split(",") if f]:
+            got = bow_limit(fam, range(first, last + 1), scales)
+            found[fam] = {str(k): v for k, v in got.items()}
+            for scale, v in got.items():
+                seen = sum(x > floor for x in v["statistic"])
+                rows.append([fam, f"x{scale:g}", "{:.1f}-{:.1f} um".format(
+                    1e6 * min(v["bow_m"]), 1e6 * max(v["bow_m"])),
+                    f"{seen}/{len(v['statistic'])}", f"{min(v['statistic']):.1f}"])
+        table(rows, ["family", "bow scale", "bow at the first step", "passes differ",
+                     "weakest (sigmas)"])
+        write_json("gap_passes_bow_limit", {
+            "command": "python benchmarks/bench_gap_passes.py " + " ".join(
+                argv if argv is not None else sys.argv[1:]),
+            "code": code, "floor_sigmas": floor, "seeds": [first, last], "families": found})
+        return
     floor_frozen = DiagnosisSettings().pass_floor_sigmas
     null = logged("null", "own", code)
     if args.null and not args.report_only:
