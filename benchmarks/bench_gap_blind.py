@@ -119,7 +119,6 @@ def _code_only(source):
 
 def code_hash():
     """Hash of the diagnosis's and the plants' code (comments and docstrings aside)."""
-    import hashlib
 
     import sknarx
 
@@ -128,7 +127,14 @@ def code_hash():
     # settings enter the log key separately
     files = sorted(f for d in TRIAL_CODE for f in (root / d).glob("*.py")
                    if f.name != "settings.py")
-    files += sorted((Path(__file__).parent / "plants").glob("*.py"))
+    return hash_files(files + sorted((Path(__file__).parent / "plants").glob("*.py")))
+
+
+def hash_files(files):
+    """The first 16 hex digits of the SHA-256 of ``files``' code, in order, comments and
+    docstrings aside (:func:`_code_only`): what a log keys its trials by."""
+    import hashlib
+
     h = hashlib.sha256()
     for f in files:
         h.update(_code_only(f.read_text()).encode())

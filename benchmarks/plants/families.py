@@ -291,7 +291,7 @@ def make_family_trial(kind, seed, family, plant=None, second_pass=False):
     oracle = measure(clean, no_noise)
     free = measure(clean_free, dict(no_noise, effects={}))
     out = (measured[["speed", "t", *CHANNELS]], truth, oracle, free)
-    return (*out, _second_pass(family, truth, physical, clean, plant)) if second_pass else out
+    return (*out, coast_down(family, truth, physical, clean, plant)) if second_pass else out
 
 
 def second_pass_draw(truth):
@@ -312,12 +312,14 @@ def make_family_passes(kind, seed, family, plant=None):
     physical = {n: p for n, p in truth["effects"].items() if n not in MEASUREMENT}
     clean = simulate(family, truth, physical, plant)
     return (measure(clean, truth)[["speed", "t", *CHANNELS]],
-            _second_pass(family, truth, physical, clean, plant), truth)
+            coast_down(family, truth, physical, clean, plant), truth)
 
 
-def _second_pass(family, truth, physical, clean, plant=None):
-    """The measured coast-down of a trial whose run-up's clean sweep is ``clean``: the
-    same sweep where nothing varies in time, else simulated on (see :func:`simulate`)."""
+def coast_down(family, truth, physical, clean, plant=None):
+    """The measured coast-down of a trial whose run-up's clean sweep is ``clean`` (its
+    ``physical`` effects, as :func:`simulate` takes them): the same sweep where nothing
+    varies in time, else simulated on (see :func:`simulate`), measured with its own
+    jitter and noise (:func:`second_pass_draw`)."""
     down = simulate(family, truth, physical, plant, pass_index=1) \
         if time_varying(physical) else clean
     return measure(down, dict(truth, **second_pass_draw(truth)))[["speed", "t", *CHANNELS]]
