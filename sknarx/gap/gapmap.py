@@ -146,8 +146,9 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
                 max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
-    ``(M - S) / sigma`` per feature, complex, the phase-aligned measured ``M`` and the
-    noise's share of each feature's variance ``sigma^2``.
+    ``(M - S) / sigma`` per feature, complex, the phase-aligned measured ``M``, and
+    each feature's noise variance and whole variance ``sigma^2`` (m^2; the rest of it is
+    tolerance).
 
     Two phase alignments, each bounded by what it may absorb:
 
@@ -190,7 +191,7 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
         ix, iy, tol_b = whirl
         d[ix], d[iy] = _whirl_whitened(M[ix] - Sc[ix], M[iy] - Sc[iy], var[ix], var[iy],
                                        tol[ix], tol[iy], tol_b, Sc[ix], Sc[iy])
-    return d, M, noise / np.maximum(var, 1e-300)
+    return d, M, noise, var
 
 
 def feature_layout(index: pd.MultiIndex):
@@ -228,10 +229,10 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     Sc = s["re"].to_numpy() + 1j * s["im"].to_numpy()
     order_k, speed_idx, group_idx = feature_layout(m.index)
     tol = model_tol(m)
-    d, M, noise_share = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(),
-                                    order_k, speed_idx, group_idx, tol, rtol,
-                                    max_offset_deg, whirl_layout(m.index, whirl_tol(m)),
-                                    harmonic_rtol)
+    d, M, noise, var = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(),
+                                   order_k, speed_idx, group_idx, tol, rtol,
+                                   max_offset_deg, whirl_layout(m.index, whirl_tol(m)),
+                                   harmonic_rtol)
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)
@@ -242,7 +243,7 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     out["excess"] = np.clip(z2 - expect, 0.0, None)
     # the noise's share of each feature's variance (the rest is tolerance): where the two
     # agree, z2 is this share times chi-square (2 degrees of freedom for a vector)
-    out["noise_share"] = noise_share
+    out["noise_share"] = noise / np.maximum(var, 1e-300)
     return out
 
 
@@ -252,8 +253,8 @@ def fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, rtol=0.01,
     :func:`compare` computes them; the layout from :func:`feature_layout`, ``model_tol``
     (m) per feature, ``whirl`` the probe pairs from :func:`whirl_layout` (None: channel
     by channel)."""
-    d, _, _ = _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol,
-                          rtol, max_offset_deg, whirl)
+    d = _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
+                    max_offset_deg, whirl)[0]
     return np.concatenate([d.real, d.imag])
 
 
