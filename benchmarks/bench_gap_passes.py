@@ -5,7 +5,9 @@ Run: ``python benchmarks/bench_gap_passes.py --null 20`` first (the floor), then
 processes on two cores), then ``--report-only`` to write
 ``results/bench_gap_passes.json`` (``--report-only --code HASH``: from the logs of a
 report's code after the code changed). ``--bow-limit FIRST:LAST`` measures instead how
-small a relaxing bow the test still sees (fresh bow draws, each bow scaled). Every
+small a relaxing bow the test still sees (fresh bow draws, each bow scaled). ``--pass-rtol
+VALUE`` runs all of it at another relative tolerance than the package's: its own null
+pairs first (``--null 20 --pass-rtol VALUE``), whose floor then decides. Every
 compared trial is appended to a JSONL log as it finishes
 (``results/gap_passes_<phase>_<family>[.shard<k>of<n>].jsonl``): an interrupted run
 resumes where it stopped; a logged trial is reused only while the code it depends on (the
@@ -39,7 +41,6 @@ the trial's logged measurement, model-free (``sknarx.gap.passes.compare_passes``
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import time
@@ -50,8 +51,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
-    _code_only,
     detectable,
+    hash_files,
     passes_differ,
     score,
     truth_label,
@@ -77,11 +78,7 @@ def code_hash():
 
     root = Path(sknarx.__file__).parent
     files = [root / f for f in PASS_CODE] + sorted((root / "rotor").glob("*.py"))
-    files += sorted((Path(__file__).parent / "plants").glob("*.py"))
-    h = hashlib.sha256()
-    for f in files:
-        h.update(_code_only(f.read_text()).encode())
-    return h.hexdigest()[:16]
+    return hash_files(files + sorted((Path(__file__).parent / "plants").glob("*.py")))
 
 
 #: a normal's one-sided 1 % point: the floor for records whose noise is what their
@@ -99,16 +96,16 @@ def null_floor(values):
     return round(max(NORMAL_99, fitted), 3)
 
 
-def compared(kind, seed, family):
-    """One trial's two passes compared: the test's statistic, the tested orders' z2 over
-    their expectation, each order's mean z2 and how long the plant and the comparison
-    took."""
+def compared(kind, seed, family, settings):
+    """One trial's two passes compared under ``settings`` (its ``pass_rtol``): the
+    test's statistic, the tested orders' z2 over their expectation, each order's mean
+    z2 and how long the plant and the comparison took."""
     t = time.perf_counter()
     try:
         first, second, truth = make_family_passes(kind, seed, family)
     except PLANT_FAILURES as exc:  # the plant diverged
         return {"family": family, "seed": seed, "skipped": str(exc)}
-    c = compare_passes(first, second, settings=DiagnosisSettings())
+    c = compare_passes(first, second, settings=settings)
     doc = c.to_dict()
     return {"family": family, "seed": seed, "kind": truth["kind"],
             "statistic": c.statistic, "z2_ratio": c.z2_ratio,
@@ -117,19 +114,19 @@ def compared(kind, seed, family):
             "largest": doc["largest"][:1], "seconds": time.perf_counter() - t}
 
 
-def bow_limit(family, seeds, scales):
+def bow_limit(family, seeds, scales, settings):
     """How small a relaxing bow the test still sees: each of ``family``'s thermal-bow
     draws at ``seeds`` with its bow scaled by each of ``scales``, both passes simulated
-    (the first as the trial's, the second its coast-down); per scale the bows (m) and
-    the statistics."""
+    (the first as the trial's, the second its coast-down) and compared under
+    ``settings``; per scale the bows (m) and the statistics."""
     from plants.families import (
         CHANNELS,
         MEASUREMENT,
         SPEEDS,
+        coast_down,
         draw_trial,
         feature_gap,
         measure,
-        second_pass_draw,
         simulate,
     )
 
@@ -150,10 +147,10 @@ def bow_limit(family, seeds, scales):
             t = dict(truth, effects={**truth["effects"], "thermal-bow": bow})
             physical = {n: p for n, p in t["effects"].items() if n not in MEASUREMENT}
             cols = ["speed", "t", *CHANNELS]
-            first = measure(simulate(family, t, physical), t)[cols]
-            second = measure(simulate(family, t, physical, pass_index=1),
-                             dict(t, **second_pass_draw(t)))[cols]
-            stat = compare_passes(first, second, settings=DiagnosisSettings()).statistic
+            clean = simulate(family, t, physical)
+            first = measure(clean, t)[cols]
+            second = coast_down(family, t, physical, clean)
+            stat = compare_passes(first, second, settings=settings).statistic
             e, n = feature_gap(first, free, held)
             out[scale]["bow_m"].append(bow["bow"])
             out[scale]["statistic"].append(stat)
@@ -175,9 +172,11 @@ def logged(phase, family, code):
     return done
 
 
-def run(trials, phase, family, code, shard=(0, 1)):
+def run(trials, phase, family, code, shard=(0, 1), settings=None):
     """Compare the ``(kind, seed)`` trials not yet logged (every ``n``-th from the
-    ``k``-th with ``shard``); returns every logged comparison of them, by seed."""
+    ``k``-th with ``shard``) under ``settings``; returns every logged comparison of
+    them, by seed."""
+    settings = settings or DiagnosisSettings()
     k, n = shard
     log = RESULTS / (f"gap_passes_{phase}_{family}"
                      + (f".shard{k}of{n}" if n > 1 else "") + ".jsonl")
@@ -186,7 +185,7 @@ def run(trials, phase, family, code, shard=(0, 1)):
     for i, kind, seed in todo:
         if i % n != k:
             continue
-        r = {**compared(kind, seed, family), "code": code}
+        r = {**compared(kind, seed, family, settings), "code": code}
         with log.open("a") as f:
             f.write(json.dumps(r, default=float) + "\n")
         done[seed] = r
@@ -273,6 +272,10 @@ def main(argv=None):
                          ".json)")
     ap.add_argument("--bow-scales", default="1,0.3,0.1,0.03,0.01",
                     help="with --bow-limit: the scales, comma-separated")
+    ap.add_argument("--pass-rtol", type=float, default=None,
+                    help="the comparison's relative tolerance (pass_rtol; default the "
+                         "package's); another value keys its own logs and is decided at "
+                         "the floor its own --null pairs measure")
     ap.add_argument("--code", default=None,
                     help="with --report-only: the logs of this code hash (a report's "
                          "'code'), written before the code changed; default: the code as "
@@ -281,15 +284,40 @@ def main(argv=None):
     shard = tuple(int(v) for v in args.shard.split("/"))
     if args.code and not args.report_only:
         ap.error("--code reads old logs: it goes with --report-only")
-    code = args.code or code_hash()
+    package = DiagnosisSettings()
+    rtol = package.pass_rtol if args.pass_rtol is None else args.pass_rtol
+    if not 0.0 <= rtol < 1.0:
+        ap.error(f"--pass-rtol {rtol:g}: give a share of a vector's size in [0, 1)")
+    settings = replace(package, pass_rtol=rtol)
+    # another tolerance is another test: its logs, and its floor, are its own
+    tag = "" if rtol == package.pass_rtol else f"+pass_rtol={rtol:g}"
+    code = (args.code or code_hash()) + tag
+    floor_frozen = package.pass_floor_sigmas
+    null = logged("null", "own", code)
+    if args.null and not args.report_only and not args.bow_limit:
+        print(f"null pairs of passes (own family, effect-free, code {code})", flush=True)
+        null = run([(None, 2000 + i) for i in range(args.null)], "null", "own", code, shard,
+                   settings)
+    null_values = [r["statistic"] for r in null.values() if "skipped" not in r]
+    floor_measured = null_floor(null_values)
+    if floor_measured is not None:
+        print(f"floor from {len(null_values)} null pairs: {floor_measured:.3f} sigmas "
+              f"(their mean {np.mean(null_values):.2f}, sd {np.std(null_values, ddof=1):.2f}, "
+              f"largest {max(null_values):.2f}); frozen in the package: {floor_frozen:.3f}",
+              flush=True)
+    if tag:
+        if floor_measured is None:
+            ap.error(f"--pass-rtol {rtol:g}: no floor measured at this tolerance yet; run "
+                     "--null 20 with it first")
+        floor_frozen = floor_measured
     if args.bow_limit:
         first, last = (int(v) for v in args.bow_limit.split(":"))
         scales = [float(v) for v in args.bow_scales.split(",")]
-        floor = DiagnosisSettings().pass_floor_sigmas
+        floor = floor_frozen
         no_gap = DiagnosisSettings().no_gap_per_feature
         found, rows = {}, []
         for fam in [f for f in args.families.split(",") if f]:
-            got = bow_limit(fam, range(first, last + 1), scales)
+            got = bow_limit(fam, range(first, last + 1), scales, settings)
             found[fam] = {str(k): v for k, v in got.items()}
             for scale, v in got.items():
                 seen = [x > floor for x in v["statistic"]]
@@ -302,24 +330,13 @@ def main(argv=None):
         table(rows, ["family", "bow scale", "bow at the first step", "passes differ",
                      "weakest (sigmas)", "visible on one pass",
                      "visible ones whose passes differ"])
-        write_json("gap_passes_bow_limit", {
+        write_json("gap_passes_bow_limit" + (f"_rtol{rtol:g}" if tag else ""), {
             "command": "python benchmarks/bench_gap_passes.py " + " ".join(
                 argv if argv is not None else sys.argv[1:]),
-            "code": code, "floor_sigmas": floor, "no_gap_per_feature": no_gap,
+            "code": code, "pass_rtol": rtol, "floor_sigmas": floor,
+            "no_gap_per_feature": no_gap,
             "seeds": [first, last], "families": found})
         return
-    floor_frozen = DiagnosisSettings().pass_floor_sigmas
-    null = logged("null", "own", code)
-    if args.null and not args.report_only:
-        print(f"null pairs of passes (own family, effect-free, code {code})", flush=True)
-        null = run([(None, 2000 + i) for i in range(args.null)], "null", "own", code, shard)
-    null_values = [r["statistic"] for r in null.values() if "skipped" not in r]
-    floor_measured = null_floor(null_values)
-    if floor_measured is not None:
-        print(f"floor from {len(null_values)} null pairs: {floor_measured:.3f} sigmas "
-              f"(their mean {np.mean(null_values):.2f}, sd {np.std(null_values, ddof=1):.2f}, "
-              f"largest {max(null_values):.2f}); frozen in the package: {floor_frozen:.3f}",
-              flush=True)
     cats = [c for c in args.categories.split(",") if c]
     families = [f for f in args.families.split(",") if f]
     results = {}
@@ -330,7 +347,7 @@ def main(argv=None):
             comps = logged("eval", fam, code)
         else:
             comps = run([(rec["kind"] if rec["kind"] != "none" else None, rec["seed"])
-                         for _, rec, _ in trials], "eval", fam, code, shard)
+                         for _, rec, _ in trials], "eval", fam, code, shard, settings)
         results[fam] = (trials, comps)
     if shard[1] > 1 and not args.report_only:
         print("shard done; run with --report-only to write the report")
@@ -358,7 +375,9 @@ def main(argv=None):
     write_json("bench_gap_passes", {
         "command": "python benchmarks/bench_gap_passes.py " + " ".join(
             argv if argv is not None else sys.argv[1:]),
-        "code": code, "floor_frozen": floor_frozen,
+        "code": code, "pass_rtol": rtol, "floor_frozen": floor_frozen,
+        "floor_source": ("measured by this tolerance's null pairs" if tag else
+                         "frozen in the package (DiagnosisSettings.pass_floor_sigmas)"),
         "null": {"n": len(null_values), "statistic": null_values,
                  "floor_measured": floor_measured,
                  "median": float(np.median(null_values)) if null_values else None},

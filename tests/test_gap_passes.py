@@ -57,6 +57,20 @@ def test_passes_of_an_unchanged_rotor_agree_and_a_changed_one_is_found_where_it_
     assert json.loads(json.dumps(doc)) == doc  # the document's entry is plain JSON
 
 
+def test_the_relative_tolerance_sets_the_smallest_change_the_passes_show():
+    """``pass_rtol`` is what a record cannot pin down of a rig's repeatability: a 1x
+    that grew 1 % at every step is inside the package's 1 % and seen at 0.3 %, and an
+    unchanged rotor stays under the floor at both."""
+    from dataclasses import replace
+
+    tight = replace(DiagnosisSettings(), pass_rtol=0.003)
+    grown = one_pass(1, amplitude=lambda w: 2.02e-5)
+    assert DiagnosisSettings().pass_rtol == 0.01
+    assert not compare_passes(grown, one_pass(2)).changed
+    assert compare_passes(grown, one_pass(2), settings=tight).changed
+    assert not compare_passes(one_pass(1), one_pass(2), settings=tight).changed
+
+
 def test_a_second_pass_whose_steps_sit_a_little_apart_is_compared_at_its_slope():
     """A rig's speed control repeats a step to a fraction of a per cent: on a steep flank
     of a resonance that moves the 1x by much more than the noise, which the first pass's
@@ -232,6 +246,22 @@ def test_the_logged_trials_with_their_coast_down_give_the_record(
     assert one["top1"] == top1 and two["false_alarm"] == false_alarm
     assert report["families"][family]["two_passes"]["unexplained_out_of_library"] == \
         out_of_library[1]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--pass-rtol", "1.5"], "give a share of a vector's size in [0, 1)"),
+    (["--pass-rtol", "0.0031", "--report-only"], "no floor measured at this tolerance"),
+    (["--code", "abc"], "--code reads old logs"),
+])
+def test_the_passes_benchmark_names_a_usage_error(argv, message, capsys):
+    """Another tolerance is another test: it is decided only at a floor its own null
+    pairs measured, never at the package's."""
+    import bench_gap_passes as bench
+
+    with pytest.raises(SystemExit) as exc:
+        bench.main(argv)
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
 
 
 def test_a_blind_trial_in_two_passes_diagnoses_with_both_and_logs_the_test(monkeypatch):

@@ -16,19 +16,20 @@ disagree is one that no candidate explains, and :func:`sknarx.gap.diagnose` says
 ``unexplained`` for it, whatever one pass alone would have named.
 
 Each feature is compared as the gap map compares (:func:`sknarx.gap.gapmap.compare`).
-The first pass plays the measurement and the second its twin, each with its own
-standard errors, and the reference's offset is removed per speed step. Where the passes
-agree, a shaft order's ``z2`` is its noise share of the variance times a chi-square with
-two degrees of freedom. The 1 % relative tolerance is the rest of the variance, and it is
-no random part. So the sum of ``z2`` over the shaft orders (1/3x to 3x) of the steps
-both passes hold has a known mean and variance whatever the sweep holds: a rotor whose
-harmonics stand far above the noise, or one whose records are noise but for the 1x.
-The test is that sum's excess over its mean, in standard deviations (``statistic``),
-against ``pass_floor_sigmas``. That floor is the larger of the one-sided 1 % point of a
-normal and that of effect-free pairs of passes, measured and frozen like the diagnosis's
-own floor (``benchmarks/bench_gap_passes.py``). The non-synchronous line energy is
-listed, one sum over its bands per step and channel, but not tested: how much one line
-estimate scatters from record to record is not known from a record.
+The first pass plays the measurement and the second its twin, each with its own standard
+errors, and the reference's offset is removed per speed step. Where the passes agree, a
+shaft order's ``z2`` is its noise share of the variance times a chi-square with two
+degrees of freedom. The relative tolerance (``pass_rtol``, 1 % of each vector's size,
+the gap map's) is the rest of the variance, and it is no random part. So the sum of
+``z2`` over the shaft orders (1/3x to 3x) of the steps both passes hold has a known mean
+and variance whatever the sweep holds: a rotor whose harmonics stand far above the
+noise, or one whose records are noise but for the 1x. The test is that sum's excess over
+its mean, in standard deviations (``statistic``), against ``pass_floor_sigmas``. That
+floor is the larger of the one-sided 1 % point of a normal and that of effect-free pairs
+of passes, measured and frozen like the diagnosis's own floor
+(``benchmarks/bench_gap_passes.py``). The non-synchronous line energy is listed, one sum
+over its bands per step and channel, but not tested: how much one line estimate scatters
+from record to record is not known from a record.
 
 Two speed steps are the same step when their speeds agree to ``pass_speed_rtol``. A step
 that a rig's speed control placed a little apart in the second pass is compared with a
@@ -206,8 +207,8 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     channels : sequence of str, optional
         Channels to compare (every DOF column of the first pass by default).
     settings : DiagnosisSettings, optional
-        ``pass_floor_sigmas``, ``pass_speed_rtol`` and ``transient_s`` (the frozen
-        defaults by default).
+        ``pass_floor_sigmas``, ``pass_speed_rtol``, ``pass_rtol`` and ``transient_s``
+        (the frozen defaults by default).
 
     Returns
     -------
@@ -262,8 +263,8 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     f1["model_tol"] = _speed_tolerance(f1, moved)
     f2 = f2.set_index(_KEY).reindex(pd.MultiIndex.from_frame(f1[_KEY])).reset_index()
     # the two records of one rotor have no model form between them: no harmonic
-    # tolerance, the comparison's own 1 % kept for what a record cannot pin down
-    table = compare(f1, f2, harmonic_rtol=0.0)
+    # tolerance, the relative one kept for what a record cannot pin down
+    table = compare(f1, f2, rtol=settings.pass_rtol, harmonic_rtol=0.0)
     return PassComparison(
         table=table, statistic=sigmas_over_noise(table),
         floor=settings.pass_floor_sigmas,

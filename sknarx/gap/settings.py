@@ -150,6 +150,12 @@ class DiagnosisSettings:
     pass_floor_sigmas: float = 2.326
     # ... whose steps are the same step where their speeds agree to this share
     pass_speed_rtol: float = 0.005
+    # ... and whose shaft-order vectors agree to this share of their size beyond the
+    # noise: what a record cannot pin down of how well a rig repeats its 1x (the gap
+    # map's own 1 %). It sets the smallest change the test sees (about 20 um of bow on
+    # the paper rotor); a rig that repeats better may lower it, with the floor measured
+    # again at the new value (bench_gap_passes.py --null N --pass-rtol VALUE)
+    pass_rtol: float = 0.01
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
