@@ -13,6 +13,10 @@ finished run, not an evaluation: thresholds chosen by looking at the evaluation 
 fitted on them, so a threshold change it suggests must be frozen and run on fresh seeds
 before its scores are claimed.
 
+``--one-pass`` decides the what-if side of a run made with ``bench_gap_blind.py
+--second-pass`` from the first pass alone (each trial's pass comparison left out): the
+same trials with and without the coast-down.
+
 ``--without-readings`` decides the what-if side of a run made with ``bench_gap_blind.py
 --reading`` from the rotor as given's entries alone (those fitted in a reading carry
 ``rotor_reading``): the same trials with and without the readings, the verdict's recheck
@@ -64,7 +68,7 @@ from sknarx.gap.core import effect_names, shrinks_alone  # noqa: E402
 #: settings change what the search finds, which a log cannot replay
 DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
             "breadth_waived_at_floor", "attribute_below_floor", "pair_trigger", "pair_gain",
-            "pair_margin", "pair_rival_shrink", "linear_form_gain")
+            "pair_margin", "pair_rival_shrink", "linear_form_gain", "pass_floor_sigmas")
 #: the decision settings that are switches (True or False)
 SWITCHES = ("breadth_waived_at_floor", "attribute_below_floor")
 #: the decision settings None switches off
@@ -223,6 +227,13 @@ def without_readings(rec):
     return {**rec, "ranking": [x for x in rec["ranking"] if "rotor_reading" not in x]}
 
 
+def first_pass_only(rec):
+    """A logged trial measured in two passes (``bench_gap_blind.py --second-pass``) with
+    its pass comparison left out: as the run would have decided from the first pass
+    alone (the search is the first pass's either way)."""
+    return {k: v for k, v in rec.items() if k != "passes"}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--report", required=True,
@@ -238,6 +249,10 @@ def main(argv=None):
                          "(a run with bench_gap_blind --reading: its entries fitted in a "
                          "reading carry it), so the two sides are the run with and "
                          "without its readings")
+    ap.add_argument("--one-pass", action="store_true",
+                    help="decide the what-if side from the first pass alone (a run with "
+                         "bench_gap_blind --second-pass: its pass comparison left out), so "
+                         "the two sides are the run with and without its second pass")
     ap.add_argument("--pairs", action="store_true",
                     help="also list every pair verdict (under the what-if thresholds) with "
                     "what the search knew when it chose it (pair_statistics)")
@@ -262,10 +277,11 @@ def main(argv=None):
     rows, changed, counted = [], [], []
     for fam, recs in evals.items():
         theirs = [without_readings(r) for r in recs] if args.without_readings else recs
+        theirs = [first_pass_only(r) for r in theirs] if args.one_pass else theirs
         for label, s, rs in (("frozen", frozen, recs), ("what-if", other, theirs)):
             sc = score(rs, s)
             rows.append([fam, label, len(recs)] + [f"{sc[k]:.2f}" for k in COLUMNS])
-            if label == "frozen" or changes or args.without_readings:
+            if label == "frozen" or changes or args.without_readings or args.one_pass:
                 # counts to pool runs by, under either
                 counted += [[fam, f"{key}{'' if label == 'frozen' else ' (what-if)'}",
                              f"{k}/{n}", f"{sc[key]:.2f}", f"{lo:.2f}-{hi:.2f}"]
@@ -283,7 +299,8 @@ def main(argv=None):
             counted += [[fam, f"{key} ({name})", f"{k}/{n}", f"{sc[key]:.2f}",
                          f"{lo:.2f}-{hi:.2f}"] for key, k, n, lo, hi in intervals(sc)]
     print("what-if:", ", ".join([*(f"{k}={v}" for k, v in changes.items()),
-                                 *(["without the readings"] if args.without_readings else [])])
+                                 *(["without the readings"] if args.without_readings else []),
+                                 *(["the first pass alone"] if args.one_pass else [])])
           or "(nothing)")
     table(rows, ["family", "thresholds", "trials", *COLUMNS])
     print()

@@ -215,6 +215,11 @@ def test_a_logged_trial_measured_in_two_passes_is_decided_as_diagnose_decides_it
     assert passes_differ(over, s) and verdict(over, s)[0] == "unexplained"
     assert not passes_differ(under, s)
     assert verdict(under, s) == verdict(rec, s)
+    # rescore_gap_blind --one-pass: the same trial decided from its first pass alone
+    from rescore_gap_blind import first_pass_only
+
+    assert verdict(first_pass_only(over), s) == verdict(rec, s)
+    assert "passes" in over
 
 
 @pytest.mark.slow
