@@ -694,6 +694,36 @@ def test_the_59000_run_is_the_package_rule_and_its_logs_give_its_report():
     assert blind.score(evals["ross"], ran)["top1"] == pytest.approx(23 / 27)
 
 
+def test_the_61000_run_in_two_passes_names_every_bow_unexplained_and_moves_nothing_else():
+    """The 61000 run (docs/gap_validation.md, *The 61000 run's score*): the package's
+    rule with every trial measured in two passes. Its logs give the report's scores;
+    every thermal bow's passes differ and no other trial's do; decided from the first
+    pass alone (``rescore_gap_blind --one-pass``) only those bows' verdicts change, and
+    out-of-library ``unexplained`` falls from 13/14 to 8/14 (ROSS) and from 12/12 to
+    10/12 (second plant) while every other rate stays."""
+    import rescore_gap_blind as rescore
+
+    ran, evals = _logged_run("results/bench_gap_blind_61000_c8e46b2.json", "3664de5")
+    _assert_decided_as(ran, DiagnosisSettings(), but=())
+    assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 65, "second": 68}
+    for recs in evals.values():
+        for r in recs:
+            assert blind.passes_differ(r, ran) == (r["kind"] == "thermal-bow"), r["seed"]
+    one_pass = {fam: [rescore.first_pass_only(r) for r in recs] for fam, recs in evals.items()}
+    changed = _changed_verdicts(evals, ran, ran, rescore.first_pass_only)
+    assert {(fam, seed) for fam, seed, _ in changed} == {
+        ("ross", 61007), ("ross", 61022), ("ross", 61037), ("ross", 61052), ("ross", 61067),
+        ("second", 61007), ("second", 61023), ("second", 61039)}
+    for fam, ool in (("ross", ((13, 14), (8, 14))), ("second", ((12, 12), (10, 12)))):
+        two, one = (dict((k, (n_k, n)) for k, n_k, n, *_ in rescore.intervals(
+            blind.score(recs, ran))) for recs in (evals[fam], one_pass[fam]))
+        assert (two["unexplained_out_of_library"], one["unexplained_out_of_library"]) == ool
+        for rate in ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm"):
+            assert two[rate] == one[rate], (fam, rate)
+    assert blind.score(evals["ross"], ran)["top1"] == pytest.approx(24 / 27)
+    assert blind.score(evals["second"], ran)["top1"] == pytest.approx(27 / 30)
+
+
 @pytest.fixture(scope="module")
 def package_runs():
     """``frontier_gap_blind``'s runs as the package's rule decides them, loaded once for
