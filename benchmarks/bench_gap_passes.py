@@ -372,7 +372,7 @@ def main(argv=None):
     for fam, d in per_family.items():
         print(f"{fam}: passes differ by true kind: " + ", ".join(
             f"{json.loads(k)} {v[0]}/{v[1]}" for k, v in sorted(d["changed_by_kind"].items())))
-    write_json("bench_gap_passes", {
+    write_json("bench_gap_passes" + (f"_rtol{rtol:g}" if tag else ""), {
         "command": "python benchmarks/bench_gap_passes.py " + " ".join(
             argv if argv is not None else sys.argv[1:]),
         "code": code, "pass_rtol": rtol, "floor_frozen": floor_frozen,
