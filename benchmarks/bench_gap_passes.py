@@ -339,6 +339,9 @@ def main(argv=None):
         return
     cats = [c for c in args.categories.split(",") if c]
     families = [f for f in args.families.split(",") if f]
+    if not families:
+        # the null pairs alone: the report of the evaluation is left as it is
+        return
     results = {}
     for fam in families:
         trials = [t for t in evaluation_trials(fam) if t[0] in cats]

@@ -36,8 +36,8 @@ coast_down = pd.concat([step(w, 2 * n - 1 - i, seed=100 + i) for i, w in enumera
 
 passes = compare_passes(run_up, coast_down)
 top = passes.to_dict()["largest"][0]
-print(f"the passes differ: {passes.changed} ({passes.statistic:.0f} standard deviations "
-      f"over an unchanged rotor's; floor {passes.floor:.2f})")
+print(f"the passes differ: {passes.changed} (a normal deviate of {passes.statistic:.0f} "
+      f"beyond the dead band; floor {passes.floor:.2f})")
 print(f"most at {top['feature']} on {top['channel']} at {top['speed']:.1f} rad/s: "
       f"{1e6 * top['first_m']:.1f} um up, {1e6 * top['second_m']:.1f} um down")
 

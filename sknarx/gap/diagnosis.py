@@ -542,8 +542,8 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
             # model-free and cheap: a rotor that changed between passes is said so even
             # where the search then names a time-invariant effect for the first pass
             passes = compare_passes(measured, second_pass, channels, settings)
-            logger.info("second pass against the first: %.3g standard deviations over "
-                        "an unchanged rotor's (floor %.3g): %s", passes.statistic, passes.floor,
+            logger.info("second pass against the first: a normal deviate of %.3g beyond "
+                        "the dead band (floor %.3g): %s", passes.statistic, passes.floor,
                         "the rotor changed between the passes" if passes.changed
                         else "the passes agree")
         return with_passes(_diagnose(measured, base, channels, candidates, settings,

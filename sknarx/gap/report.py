@@ -389,15 +389,22 @@ def _one_pass_text(doc) -> str:
     return f" The first pass alone: {said}."
 
 
+def _band(p) -> str:
+    """The pass test's dead band in words (its share of a vector's size; older documents
+    without it: the 1 % the test then used as a tolerance)."""
+    return (f"{100 * float(p.get('band_rtol', 0.01)):.3g} % of each vector's size (and a "
+            "moved step's slope)")
+
+
 def passes_text(doc) -> str:
     """The verdict's sentence on two passes of the sweep (``passes``), empty without
     them."""
     p = doc.get("passes")
     if not p:
         return ""
-    test = (f"their shaft orders' z\u00b2 {float(p['z2_ratio']):.3g} times what two "
-            f"records of an unchanged rotor give, {float(p['statistic']):.3g} standard "
-            f"deviations against the floor of {float(p['floor_sigmas']):.3g}")
+    test = (f"beyond a dead band of {_band(p)}, their shaft orders' z\u00b2 is "
+            f"{float(p['z2_ratio']):.3g} times what noise alone gives, a normal deviate of "
+            f"{float(p['statistic']):.3g} against the floor of {float(p['floor_sigmas']):.3g}")
     if not p["changed"]:
         return f" The two passes of the sweep agree ({test})."
     top = (p.get("largest") or [None])[0]
@@ -436,9 +443,10 @@ def _passes_html(doc) -> str:
                      for k, v in unmatched.items() if v)
     return (f"<h2>Two passes of the sweep</h2><p>{p['n_steps']} speed steps in both passes, "
             f"{p['n_features']} features compared model-free, the {p['n_tested']} shaft-order "
-            f"vectors (1/3x-3x) tested: their z\u00b2 is {float(p['z2_ratio']):.3g} times "
-            "what two records of an unchanged rotor give, "
-            f"{float(p['statistic']):.3g} standard deviations over it against the floor "
+            f"vectors (1/3x-3x) tested: beyond a dead band of {_band(p)} (what a rig does "
+            "not repeat), their z\u00b2 is "
+            f"{float(p['z2_ratio']):.3g} times what noise alone gives, a normal deviate of "
+            f"{float(p['statistic']):.3g} against the floor "
             f"of {float(p['floor_sigmas']):.3g} (a normal's "
             f"{100 * NormalDist().cdf(float(p['floor_sigmas'])):.0f} % point): the passes "
             f"{'differ' if p['changed'] else 'agree'}. Line energies (one sum over the "

@@ -143,18 +143,19 @@ class DiagnosisSettings:
     # reading is the whole search over these, so its cost grows with them
     reading_contenders: int = 2
     # two passes of one sweep (a run-up and its coast-down, sknarx.gap.passes) differ
-    # when their shaft orders' summed z2 exceeds its expectation for an unchanged rotor
-    # by this many standard deviations: the larger of a normal's one-sided 1 % point and
-    # the 99 % point of a normal fitted to effect-free pairs of passes of the own family,
-    # measured and frozen like no_gap_per_feature (benchmarks/bench_gap_passes.py --null)
+    # when their shaft orders' differences beyond a dead band, squared over their noise
+    # and summed, stand this far out as a normal deviate of equal upper tail under noise
+    # alone: the larger of a normal's one-sided 1 % point and the 99 % point of a normal
+    # fitted to effect-free pairs of passes of the own family, measured and frozen like
+    # no_gap_per_feature (benchmarks/bench_gap_passes.py --null)
     pass_floor_sigmas: float = 2.326
     # ... whose steps are the same step where their speeds agree to this share
     pass_speed_rtol: float = 0.005
-    # ... and whose shaft-order vectors agree to this share of their size beyond the
-    # noise: what a record cannot pin down of how well a rig repeats its 1x (the gap
-    # map's own 1 %). It sets the smallest change the test sees (about 20 um of bow on
-    # the paper rotor); a rig that repeats better may lower it, with the floor measured
-    # again at the new value (bench_gap_passes.py --null N --pass-rtol VALUE)
+    # ... the dead band: this share of a vector's size, what a rig does not repeat between
+    # two records of an unchanged rotor (the RK-4 rig's repeats differ by 0.2-0.7 % of a
+    # 1x beyond their noise: benchmarks/bench_gap_passes_real.py). It sets the smallest
+    # change the test sees; a rig that repeats better may lower it, after checking its
+    # own repeats against it
     pass_rtol: float = 0.01
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
