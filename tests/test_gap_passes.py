@@ -304,6 +304,33 @@ def test_the_passes_benchmark_names_a_usage_error(argv, message, capsys):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("family, bows, least_compared", [("second", 20, 315), ("ross", 24, 119)])
+def test_the_dead_band_decides_the_logged_trials_as_the_first_form_did(
+        family, bows, least_compared):
+    """The logged trials of 51000-59000 compared again under the dead band (code hash
+    ``5aefd9aa0f44e4d5``; ROSS's out-of-library and effect-free trials first, its
+    singles and pairs as far as that run went): every relaxing bow's passes differ, with
+    a wider margin than under the first form, and no other trial's do -- line pickups,
+    cage faults and effect-free sweeps included (docs/gap_validation.md, *Two passes of
+    one sweep: the dead band*)."""
+    import bench_gap_passes as bench
+
+    floor = DiagnosisSettings().pass_floor_sigmas
+    comps = bench.logged("eval", family, "5aefd9aa0f44e4d5")
+    trials = [(cat, rec) for cat, rec, _ in bench.evaluation_trials(family)
+              if rec["seed"] in comps]
+    assert len(trials) >= least_compared
+    assert {cat for cat, _ in trials} >= {"out-of-library", "effect-free"}
+    bow = [comps[r["seed"]]["statistic"] for _, r in trials if r["kind"] == "thermal-bow"]
+    other = [comps[r["seed"]]["statistic"] for _, r in trials if r["kind"] != "thermal-bow"]
+    assert len(bow) == bows and min(bow) > 10 * floor
+    assert max(other) < floor - 5.0
+    null = bench.logged("null", "own", "5aefd9aa0f44e4d5")
+    assert len(null) == 20 and bench.null_floor([r["statistic"] for r in null.values()]) \
+        == floor
+
+
 def test_a_blind_trial_in_two_passes_diagnoses_with_both_and_logs_the_test(monkeypatch):
     """bench_gap_blind --second-pass: the trial's first pass is the one-pass trial's
     measurement, the second its plant's coast-down, both go to diagnose, and the passes'

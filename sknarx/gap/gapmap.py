@@ -146,9 +146,7 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
                 max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
-    ``(M - S) / sigma`` per feature, complex, the phase-aligned measured ``M``, and
-    each feature's noise variance and whole variance ``sigma^2`` (m^2; the rest of it is
-    tolerance).
+    ``(M - S) / sigma`` per feature, complex, and the phase-aligned measured ``M``.
 
     Two phase alignments, each bounded by what it may absorb:
 
@@ -191,7 +189,7 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
         ix, iy, tol_b = whirl
         d[ix], d[iy] = _whirl_whitened(M[ix] - Sc[ix], M[iy] - Sc[iy], var[ix], var[iy],
                                        tol[ix], tol[iy], tol_b, Sc[ix], Sc[iy])
-    return d, M, noise, var
+    return d, M
 
 
 def feature_layout(index: pd.MultiIndex):
@@ -229,10 +227,9 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     Sc = s["re"].to_numpy() + 1j * s["im"].to_numpy()
     order_k, speed_idx, group_idx = feature_layout(m.index)
     tol = model_tol(m)
-    d, M, noise, var = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(),
-                                   order_k, speed_idx, group_idx, tol, rtol,
-                                   max_offset_deg, whirl_layout(m.index, whirl_tol(m)),
-                                   harmonic_rtol)
+    d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k, speed_idx,
+                       group_idx, tol, rtol, max_offset_deg,
+                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol)
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)
@@ -241,9 +238,6 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     out["gap"] = np.abs(M - Sc)
     out["z2"] = z2
     out["excess"] = np.clip(z2 - expect, 0.0, None)
-    # the noise's share of each feature's variance (the rest is tolerance): where the two
-    # agree, z2 is this share times chi-square (2 degrees of freedom for a vector)
-    out["noise_share"] = noise / np.maximum(var, 1e-300)
     return out
 
 

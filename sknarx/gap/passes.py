@@ -163,11 +163,11 @@ def _beyond_band(table: pd.DataFrame, band: np.ndarray) -> pd.DataFrame:
     gap = out["gap"].to_numpy()
     left = np.clip(gap - band, 0.0, None)
     out["band"] = band
-    out["z2"] = out["z2"].to_numpy() * np.where(gap > 0, (left / np.where(gap > 0, gap, 1.0))
-                                                ** 2, 0.0)
+    kept = np.divide(left, gap, out=np.zeros_like(gap), where=gap > 0)
+    out["z2"] = out["z2"].to_numpy() * kept**2
     expect = np.where(out["feature"].map(is_nonsync).to_numpy(dtype=bool), 1.0, 2.0)
     out["excess"] = np.clip(out["z2"].to_numpy() - expect, 0.0, None)
-    return out.drop(columns="noise_share")
+    return out
 
 
 def _lines_summed(features):
