@@ -23,8 +23,8 @@ the trial's logged measurement, model-free (``sknarx.gap.passes.compare_passes``
 
 * ``--null``: effect-free pairs of passes of the **own** family (seeds from 2000,
   the null seeds of the blind runs) set the floor of the test's statistic (the shaft
-  orders' summed z2 over its expectation for an unchanged rotor, in standard
-  deviations): the larger of a normal's one-sided 1 % point (2.326) and the 99 % point
+  orders' differences beyond the dead band, squared over their noise and summed, as a
+  normal deviate): the larger of a normal's one-sided 1 % point (2.326) and the 99 % point
   of a normal fitted to their statistics. It is frozen in
   ``DiagnosisSettings.pass_floor_sigmas`` before any independent plant is compared.
 * The evaluation, on the **independent plants**: each logged trial's verdict is decided
