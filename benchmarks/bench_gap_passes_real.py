@@ -10,10 +10,10 @@ unbalance campaign (``sknarx.datasets.load_rk4_unbalance``: Bently Nevada RK-4, 
 proximity probes, 1x vectors in mils 0-peak, runout-compensated) recorded every mounted
 condition three times at each of two dwell speeds without touching the rotor in between.
 Any two of those acquisitions are two passes of an unchanged rotor (two steps, four
-probes). Here each pair is compared as :func:`sknarx.gap.passes.compare_passes` compares
-two passes once it has their features: the reference's common offset removed per step
-(at most 5 degrees), a step's speed difference allowed at the first pass's slope, the
-relative tolerance ``pass_rtol``, and the statistic against the frozen floor.
+probes). Here each pair is compared by :func:`sknarx.gap.passes.compare_pass_features`,
+the kernel ``compare_passes`` runs once it has the passes' features: the reference's
+common offset removed per step (at most 5 degrees), the dead band ``pass_rtol`` (and a
+moved step's slope), and the statistic against the frozen floor.
 
 What the file does not hold is each record's standard error: the source kept the 1x
 vectors, not the records. The noise is therefore estimated from the repeats themselves.
@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -43,8 +44,7 @@ from _common import table, write_json  # noqa: E402
 
 from sknarx.datasets import load_rk4_unbalance  # noqa: E402
 from sknarx.gap import DiagnosisSettings  # noqa: E402
-from sknarx.gap.gapmap import compare  # noqa: E402
-from sknarx.gap.passes import _speed_tolerance, sigmas_over_noise  # noqa: E402
+from sknarx.gap.passes import compare_pass_features  # noqa: E402
 
 PROBES = ("plane1_x", "plane1_y", "plane2_x", "plane2_y")
 #: the reference's common offset the comparison removes per step, at most (degrees)
@@ -110,14 +110,12 @@ def features(rows, se_mil):
 
 
 def statistic(first, second, se_mil, rtol):
-    """The pass test's statistic for one pair (standard deviations over an unchanged
-    rotor's), the second side's steps matched to the first's as ``compare_passes``
-    matches them."""
-    f1, f2 = features(first, se_mil), features(second, se_mil)
-    moved = dict(zip(f1["speed"], f2["speed"] - f1["speed"], strict=True))
-    f1["model_tol"] = _speed_tolerance(f1, moved)
-    f2["speed"] = f1["speed"].to_numpy()
-    return sigmas_over_noise(compare(f1, f2, rtol=rtol, harmonic_rtol=0.0))
+    """The pass test's statistic for one pair (a normal deviate; over the floor: called
+    changed), by :func:`sknarx.gap.passes.compare_pass_features` with the dead band
+    ``rtol``."""
+    settings = replace(DiagnosisSettings(), pass_rtol=rtol)
+    return compare_pass_features(features(first, se_mil), features(second, se_mil),
+                                 settings).statistic
 
 
 def main(argv=None):

@@ -101,6 +101,17 @@ def test_the_second_pass_errors_name_the_second_pass():
         compare_passes(one_pass(1), slow)
 
 
+def test_pass_features_name_their_missing_columns_and_unshared_steps():
+    from sknarx.gap import compare_pass_features
+
+    bode = pd.DataFrame({"speed": [100.0], "window": "steady", "channel": "x",
+                         "feature": "1x", "re": 1.0, "im": 0.0, "se": 0.01})
+    with pytest.raises(ValueError, match="need the columns se"):
+        compare_pass_features(bode, bode.drop(columns="se"))
+    with pytest.raises(ValueError, match="share no speed step"):
+        compare_pass_features(bode, bode.assign(speed=150.0))
+
+
 @given(jitter=st.lists(st.floats(-2.0, 2.0), min_size=5, max_size=5),
        shift=st.floats(-np.pi, np.pi), size=st.floats(2e-6, 2e-4))
 def test_keyphasor_jitter_of_a_few_degrees_never_reads_as_a_change(jitter, shift, size):
@@ -125,12 +136,13 @@ def test_a_drift_inside_the_dead_band_never_reads_as_a_change(scale, size, phase
     assert not compare_passes(first, second).changed
 
 
-def test_the_real_rigs_unchanged_repeats_agree_at_the_package_settings():
+def test_the_real_rigs_unchanged_repeats_are_called_changed_no_more_than_the_floor_allows():
     """The RK-4 rig's repeated acquisitions of one mounted condition (285 pairs, shipped
     in ``sknarx.datasets``, noise estimated from the repeats: ``bench_gap_passes_real``)
-    are two passes of an unchanged real rotor. Beyond the 1 % dead band none is called
-    changed; with a band of 0.3 %, below the rig's own 0.2-0.7 % repeatability, some
-    are, so the band is what a rig's repeatability sets."""
+    are two passes of an unchanged real rotor. Beyond the package's 1 % dead band no
+    more of them are called changed than a test at its 1 % point allows (3; the largest
+    A023, whose 1x drifted 2.8 % between its first and third acquisition); a 3 % band
+    calls none; a 0.3 % band, below the rig's own 0.2-0.7 % repeatability, calls ten."""
     import bench_gap_passes_real as real
 
     from sknarx.datasets import load_rk4_unbalance
@@ -140,11 +152,16 @@ def test_the_real_rigs_unchanged_repeats_agree_at_the_package_settings():
     se = max(v["noise_mil"] for v in rep.values())
     assert len(pairs) == 285
     assert 0.002 < max(v["relative"] for v in rep.values()) < 0.008
-    s = DiagnosisSettings()
-    stats = [real.statistic(f, g, se, s.pass_rtol) for *_, f, g in pairs]
-    assert max(stats) < s.pass_floor_sigmas
-    tight = [real.statistic(f, g, se, 0.003) for *_, f, g in pairs[:60]]
-    assert sum(v > s.pass_floor_sigmas for v in tight) >= 1
+    floor = DiagnosisSettings().pass_floor_sigmas
+
+    def called(rtol):
+        return {(c, a, b) for c, a, b, f, g in pairs
+                if real.statistic(f, g, se, rtol) > floor}
+
+    at_package = called(DiagnosisSettings().pass_rtol)
+    assert len(at_package) <= 0.011 * len(pairs) and ("A023", 1, 3) in at_package
+    assert called(0.03) == set()
+    assert len(called(0.003)) >= 10
 
 
 def test_a_pass_compared_with_itself_has_no_excess():

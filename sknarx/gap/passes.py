@@ -45,7 +45,7 @@ above.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -56,7 +56,8 @@ from .gapmap import compare, regions
 from .measured import check_measured
 from .settings import DiagnosisSettings
 
-__all__ = ["PassComparison", "compare_passes", "sigmas_over_noise"]
+__all__ = ["PassComparison", "compare_pass_features", "compare_passes",
+           "sigmas_over_noise"]
 
 _KEY = ["speed", "window", "channel", "feature"]
 
@@ -288,8 +289,61 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
         "speed", group_keys=False).head(n)
     decay = free_response_decay(first, channels)
     transient_s = settings.transient_s if decay["transient"].median() >= 0.5 else 0.0
-    f1 = _lines_summed(order_features(first, channels, transient_s))
-    f2 = _lines_summed(order_features(second, channels, transient_s))
+    got = compare_pass_features(_lines_summed(order_features(first, channels, transient_s)),
+                                _lines_summed(order_features(second, channels, transient_s)),
+                                settings)
+    return replace(got, unmatched={
+        "first": sorted(set(info["speeds"]) - set(match.values())),
+        "second": sorted(set(info2["speeds"]) - set(match))})
+
+
+def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
+                          settings: DiagnosisSettings | None = None) -> PassComparison:
+    """Compare two passes of one sweep given as order features, model-free: the kernel
+    of :func:`compare_passes`, for passes already order-tracked (e.g. a rig's 1x Bode
+    vectors of a run-up and of its coast-down).
+
+    Parameters
+    ----------
+    first, second : DataFrame
+        One row per feature: ``speed`` (rad/s), ``window``, ``channel``, ``feature``
+        (``'1x'``, ``'2x'``, ...), ``re``, ``im`` and ``se`` (each component's standard
+        error), in one unit for both (m, or the data's own: the test reads ratios).
+        Steps within ``pass_speed_rtol`` of each other are the same step.
+    settings : DiagnosisSettings, optional
+        ``pass_floor_sigmas``, ``pass_speed_rtol`` and ``pass_rtol``.
+
+    Returns
+    -------
+    PassComparison
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from sknarx.gap.passes import compare_pass_features
+    >>> def bode(size):
+    ...     return pd.DataFrame({"speed": [100.0, 200.0], "window": "steady",
+    ...                          "channel": "x", "feature": "1x", "re": size,
+    ...                          "im": 0.0, "se": 0.01})
+    >>> compare_pass_features(bode([1.0, 2.0]), bode([1.005, 2.01])).changed
+    False
+    >>> compare_pass_features(bode([1.0, 2.0]), bode([1.2, 2.0])).changed
+    True
+    """
+    settings = settings or DiagnosisSettings()
+    need = {*_KEY, "re", "im", "se"}
+    missing = sorted((need - set(first.columns)) | (need - set(second.columns)))
+    if missing:
+        raise ValueError(f"Pass features need the columns {', '.join(missing)}.")
+    speeds1, speeds2 = sorted(first["speed"].unique()), sorted(second["speed"].unique())
+    match = _matched(speeds1, speeds2, settings.pass_speed_rtol)
+    if not match:
+        raise ValueError(
+            f"The two passes share no speed step within {100 * settings.pass_speed_rtol:g} "
+            f"% (first: {speeds1[0]:g}-{speeds1[-1]:g} rad/s, second: "
+            f"{speeds2[0]:g}-{speeds2[-1]:g} rad/s).")
+    f1 = first[first["speed"].isin(list(match.values()))].reset_index(drop=True)
+    f2 = second[second["speed"].isin(list(match))].copy()
     f2["speed"] = f2["speed"].map(match)
     moved = {match[w2]: w2 - match[w2] for w2 in match}
     slope_band = _speed_tolerance(f1, moved)
@@ -303,6 +357,6 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
         table=table, statistic=sigmas_over_noise(table),
         floor=settings.pass_floor_sigmas,
         speed_pairs=sorted((w1, w2) for w2, w1 in match.items()),
-        unmatched={"first": sorted(set(info["speeds"]) - set(match.values())),
-                   "second": sorted(set(info2["speeds"]) - set(match))},
+        unmatched={"first": sorted(set(speeds1) - set(match.values())),
+                   "second": sorted(set(speeds2) - set(match))},
         band_rtol=settings.pass_rtol)
