@@ -192,7 +192,8 @@ def _lines_summed(features):
 
 def _matched(first_speeds, second_speeds, rtol):
     """Each second-pass speed's step in the first pass (within ``rtol``, the nearest),
-    as ``{second: first}``; an error where two steps of one pass match one step."""
+    as ``{second: first}``; an error where two steps of one pass match one step, or
+    where no step matches."""
     first = np.asarray(first_speeds, dtype=float)
     out = {}
     for w in second_speeds:
@@ -204,6 +205,12 @@ def _matched(first_speeds, second_speeds, rtol):
                     f"rad/s within {100 * rtol:g} %: give each pass one record per speed "
                     "step.")
             out[float(w)] = float(first[i])
+    if not out:
+        lo1, hi1 = min(first_speeds), max(first_speeds)
+        lo2, hi2 = min(second_speeds), max(second_speeds)
+        raise ValueError(
+            f"The two passes share no speed step within {100 * rtol:g} % (first: "
+            f"{lo1:g}-{hi1:g} rad/s, second: {lo2:g}-{hi2:g} rad/s).")
     return out
 
 
@@ -275,11 +282,6 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
         raise ValueError(f"The passes are sampled at {info['fs']:g} Hz and "
                          f"{info2['fs']:g} Hz: resample one to the other's rate.")
     match = _matched(info["speeds"], info2["speeds"], settings.pass_speed_rtol)
-    if not match:
-        raise ValueError(
-            f"The two passes share no speed step within {100 * settings.pass_speed_rtol:g} "
-            f"% (first: {info['speeds'][0]:g}-{info['speeds'][-1]:g} rad/s, second: "
-            f"{info2['speeds'][0]:g}-{info2['speeds'][-1]:g} rad/s).")
     # one record length for both: a longer record's features are more precise, and
     # the standard errors would say so, but the steps then differ in what they average
     n = min(info["n_samples"], info2["n_samples"])
@@ -337,11 +339,6 @@ def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
         raise ValueError(f"Pass features need the columns {', '.join(missing)}.")
     speeds1, speeds2 = sorted(first["speed"].unique()), sorted(second["speed"].unique())
     match = _matched(speeds1, speeds2, settings.pass_speed_rtol)
-    if not match:
-        raise ValueError(
-            f"The two passes share no speed step within {100 * settings.pass_speed_rtol:g} "
-            f"% (first: {speeds1[0]:g}-{speeds1[-1]:g} rad/s, second: "
-            f"{speeds2[0]:g}-{speeds2[-1]:g} rad/s).")
     f1 = first[first["speed"].isin(list(match.values()))].reset_index(drop=True)
     f2 = second[second["speed"].isin(list(match))].copy()
     f2["speed"] = f2["speed"].map(match)
