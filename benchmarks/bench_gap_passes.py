@@ -16,7 +16,8 @@ pass comparison, the features and the plants) is unchanged.
 On one monotone pass a thermal bow relaxing while the speed rises is a smooth 1x change
 over speed, which the nominal update follows: most relaxing bows of the blind runs ended
 ``no-gap`` or as a runout (``docs/gap.md``, *Two passes of one sweep*). Here each trial
-of the package rule's runs (``frontier_gap_blind.RUNS``) gets a second pass from its
+of the package rule's runs (``frontier_gap_blind.RUNS``; ``--run REPORT:COMMITS``: of
+one finished blind run) gets a second pass from its
 own plant (``plants.families.make_family_passes``): the coast-down right after the run-up,
 its own noise and keyphasor jitter, and the bow still relaxing. That pass is compared with
 the trial's logged measurement, model-free (``sknarx.gap.passes.compare_passes``).
@@ -59,7 +60,7 @@ from bench_gap_blind import (  # noqa: E402
     visible,
 )
 from plants.families import make_family_passes  # noqa: E402
-from rescore_gap_blind import intervals, wilson  # noqa: E402
+from rescore_gap_blind import first_pass_only, intervals, wilson  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 from sknarx.gap.passes import compare_passes  # noqa: E402
@@ -208,13 +209,15 @@ def category(rec, rule):
     return "single" if isinstance(truth_label(rec, rule), str) else "pair"
 
 
-def evaluation_trials(family):
-    """The package rule's logged trials of ``family`` as ``(category, record, rule)``,
-    in the order of :data:`CATEGORIES`, then by seed."""
-    from frontier_gap_blind import decided_runs
+def evaluation_trials(family, runs=None):
+    """The logged trials of ``family`` as ``(category, record, rule)``, in the order of
+    :data:`CATEGORIES`, then by seed: those of ``runs``
+    (:class:`frontier_gap_blind.PackageRun`), by default the package rule's."""
+    from frontier_gap_blind import RUNS, decided_runs
 
     out = [(category(rec, rule), rec, rule)
-           for rule, evals in decided_runs(families=(family,)) for rec in evals[family]]
+           for rule, evals in decided_runs(runs or RUNS, families=(family,))
+           for rec in evals[family]]
     out = [t for t in out if t[0] is not None]
     return sorted(out, key=lambda t: (CATEGORIES.index(t[0]), t[1]["seed"]))
 
@@ -235,10 +238,11 @@ def rates(trials, comparisons, floor):
         if c is None or "skipped" in c:
             continue
         rule = replace(rule, pass_floor_sigmas=floor)
-        # runs decided by one rule pool into one score (every rate is a count)
+        # runs decided by one rule pool into one score (every rate is a count); a run
+        # measured in two passes logged its own comparison, which this one replaces
         one, two = runs.setdefault(rule, ([], []))
-        two.append({**rec, "passes": {"statistic": c["statistic"]}})
-        one.append(rec)
+        one.append(first_pass_only(rec))
+        two.append({**one[-1], "passes": {"statistic": c["statistic"]}})
         got = changed.setdefault(json.dumps(rec["kind"]), [0, 0])
         got[0] += passes_differ(two[-1], rule)
         got[1] += 1
@@ -276,12 +280,28 @@ def main(argv=None):
                     help="the comparison's relative tolerance (pass_rtol; default the "
                          "package's); another value keys its own logs and is decided at "
                          "the floor its own --null pairs measure")
+    ap.add_argument("--run", metavar="REPORT:COMMITS", default=None,
+                    help="compare the logged trials of this finished blind run instead of "
+                         "the package rule's (its bench_gap_blind report, relative to "
+                         "benchmarks/, and the commit prefixes of its logs, comma-"
+                         "separated); the report is written as bench_gap_passes_<run>")
     ap.add_argument("--code", default=None,
                     help="with --report-only: the logs of this code hash (a report's "
                          "'code'), written before the code changed; default: the code as "
                          "it is")
     args = ap.parse_args(argv)
     shard = tuple(int(v) for v in args.shard.split("/"))
+    runs, run_tag = None, ""
+    if args.run:
+        from frontier_gap_blind import PackageRun
+
+        report, _, commits = args.run.partition(":")
+        if not commits or not (Path(__file__).parent / report).is_file():
+            ap.error(f"--run {args.run}: give a blind run's report and its logs' commits, "
+                     "e.g. results/bench_gap_blind_61000_c8e46b2.json:3664de5")
+        runs = (PackageRun(report, commits),)
+        # bench_gap_blind_<first seed>_<commit>.json -> _<first seed>
+        run_tag = "_" + Path(report).stem.removeprefix("bench_gap_blind_").split("_")[0]
     if args.code and not args.report_only:
         ap.error("--code reads old logs: it goes with --report-only")
     package = DiagnosisSettings()
@@ -344,7 +364,7 @@ def main(argv=None):
         return
     results = {}
     for fam in families:
-        trials = [t for t in evaluation_trials(fam) if t[0] in cats]
+        trials = [t for t in evaluation_trials(fam, runs) if t[0] in cats]
         print(f"{fam}: {len(trials)} logged trials ({', '.join(cats)})", flush=True)
         if args.report_only:
             comps = logged("eval", fam, code)
@@ -375,7 +395,7 @@ def main(argv=None):
     for fam, d in per_family.items():
         print(f"{fam}: passes differ by true kind: " + ", ".join(
             f"{json.loads(k)} {v[0]}/{v[1]}" for k, v in sorted(d["changed_by_kind"].items())))
-    write_json("bench_gap_passes" + (f"_rtol{rtol:g}" if tag else ""), {
+    write_json("bench_gap_passes" + run_tag + (f"_rtol{rtol:g}" if tag else ""), {
         "command": "python benchmarks/bench_gap_passes.py " + " ".join(
             argv if argv is not None else sys.argv[1:]),
         "code": code, "pass_rtol": rtol, "floor_frozen": floor_frozen,
