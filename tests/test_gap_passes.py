@@ -307,10 +307,49 @@ def test_the_logged_trials_with_their_coast_down_give_the_record(
         out_of_library[1]
 
 
+@pytest.mark.parametrize("family, n, bows, out_of_library", [
+    ("second", 60, 3, ([10, 12], [12, 12])),
+    ("ross", 61, 5, ([8, 14], [13, 14])),
+])
+def test_the_61000_run_compared_again_under_the_dead_band_decides_as_it_ran(
+        family, n, bows, out_of_library):
+    """The 61000 run was measured in two passes with the test's first form (its logs hold
+    that statistic). ``bench_gap_passes.py --run ...61000...`` compares its trials again
+    under the dead band (``results/bench_gap_passes_61000.json``): each trial's passes
+    differ exactly where the run's did -- every visible relaxing bow, nothing else -- so
+    every rate of the run in two passes stands (docs/gap_validation.md, *Two passes of
+    one sweep: the dead band*)."""
+    import bench_gap_blind as blind
+    import bench_gap_passes as bench
+    from frontier_gap_blind import PackageRun
+
+    report = json.loads((bench.RESULTS / "bench_gap_passes_61000.json").read_text())
+    run = PackageRun("results/bench_gap_blind_61000_c8e46b2.json", "3664de5")
+    trials = bench.evaluation_trials(family, (run,))
+    comps = bench.logged("eval", family, report["code"])
+    assert len(trials) == n and all(t[1]["seed"] in comps for t in trials)
+    floor = DiagnosisSettings().pass_floor_sigmas
+    for _, rec, rule in trials:
+        # the first form's decision, as the run logged it, against the dead band's
+        assert blind.passes_differ(rec, rule) == (comps[rec["seed"]]["statistic"] > floor)
+    pooled, by_kind = bench.rates(trials, comps, floor)
+    assert by_kind['"thermal-bow"'] == [bows, bows]
+    assert sum(v[0] for k, v in by_kind.items() if k != '"thermal-bow"') == 0
+    one, two = pooled["one_pass"], pooled["two_passes"]
+    assert (one["unexplained_out_of_library"], two["unexplained_out_of_library"]) == \
+        out_of_library
+    for rate in ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm"):
+        assert one[rate] == two[rate], rate
+    assert report["families"][family]["two_passes"]["unexplained_out_of_library"] == \
+        out_of_library[1]
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--pass-rtol", "1.5"], "give a share of a vector's size in [0, 1)"),
     (["--pass-rtol", "0.0031", "--report-only"], "no floor measured at this tolerance"),
     (["--code", "abc"], "--code reads old logs"),
+    (["--run", "results/no_such_report.json:abc"], "give a blind run's report and its logs'"),
+    (["--run", "results/bench_gap_blind_61000_c8e46b2.json"], "give a blind run's report"),
 ])
 def test_the_passes_benchmark_names_a_usage_error(argv, message, capsys):
     """Another tolerance is another test: it is decided only at a floor its own null
