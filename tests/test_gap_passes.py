@@ -93,8 +93,11 @@ def test_steps_one_pass_lacks_are_left_out_and_said():
 
 def test_the_second_pass_errors_name_the_second_pass():
     bad = one_pass(2).drop(columns=["t"])
-    with pytest.raises(ValueError, match="^The second pass: Measured data lack"):
+    with pytest.raises(ValueError, match=r"^The second pass .*: Measured data lack"):
         compare_passes(one_pass(1), bad)
+    with pytest.raises(ValueError, match=r"first pass's channels \['xO1', 'yO1'\]\): "
+                                         r"Channel\(s\) \['xO1'\] not in the data .*--channels"):
+        compare_passes(one_pass(1), one_pass(2).drop(columns=["xO1"]))
     slow = one_pass(2)
     slow["t"] = slow["t"] * 2.0
     with pytest.raises(ValueError, match="sampled at 1000 Hz and 500 Hz"):

@@ -40,11 +40,15 @@ def check_measured(df: pd.DataFrame, channels=None):
     if unknown:
         raise ValueError(f"Unknown channel(s) {unknown}; channels are named after DOFs: "
                          f"{', '.join(TRANSLATIONAL)}.")
+    if not channels:
+        raise ValueError(f"No measured channel column found (columns: {list(df.columns)[:10]}); "
+                         "name one column per channel after its DOF "
+                         f"({', '.join(TRANSLATIONAL)}), in metres.")
     absent = [c for c in channels if c not in df.columns]
-    if absent or not channels:
-        raise ValueError(f"No measured channel column found (looked for {absent or 'any of '}"
-                         f"{'' if absent else ', '.join(TRANSLATIONAL)}; found "
-                         f"{list(df.columns)[:10]}).")
+    if absent:
+        raise ValueError(f"Channel(s) {absent} not in the data (columns: "
+                         f"{list(df.columns)[:10]}); give them, or choose the channels the "
+                         "data hold (--channels, or channels=).")
     cols = ["speed", "t", *channels]
     bad = [c for c in cols if not np.all(np.isfinite(pd.to_numeric(df[c], errors="coerce")))]
     if bad:

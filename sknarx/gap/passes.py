@@ -277,7 +277,9 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     try:
         second, info2 = check_measured(second, channels)
     except ValueError as exc:
-        raise ValueError(f"The second pass: {exc}") from exc
+        # the second pass is read with the first pass's channels: say which they are
+        raise ValueError(f"The second pass (read with the first pass's channels "
+                         f"{list(channels)}): {exc}") from exc
     if abs(info2["fs"] - info["fs"]) > 1e-6 * info["fs"]:
         raise ValueError(f"The passes are sampled at {info['fs']:g} Hz and "
                          f"{info2['fs']:g} Hz: resample one to the other's rate.")
