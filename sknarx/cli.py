@@ -93,9 +93,18 @@ def _gap(args) -> int:
     out = _check_out(args.out)
     cfg = load_config(args.rotor) if args.rotor else {}
     model = cfg.get("rotor", {}).get("model", "paper")
+    if model not in ("paper", "beam"):
+        raise ValueError(f"--rotor {args.rotor}: [rotor] model = {model!r}; give 'paper' (the "
+                         "12-DOF paper rotor, time-series sweeps) or 'beam' (a beam rotor, "
+                         "order-tracked 1x records).")
     header = read_table(args.measured, what="measured data", nrows=1)
     order_domain = "t" not in header.columns and any(c.startswith("amp_") for c in header)
-    if model != "paper" or order_domain:
+    if order_domain and model == "paper":
+        raise ValueError(f"--measured {args.measured} is an order-tracked (1x Bode) record: "
+                         "it is diagnosed against a beam rotor file, --rotor FILE with "
+                         "[rotor] model = 'beam' (see examples/rk4/rotor.toml); the paper's "
+                         "rotor takes time-series sweeps (speed, t, a column per DOF).")
+    if model == "beam":
         from .gap.bode_report import write_bode_outputs
         from .gap.orderdomain import diagnose_order_domain
 

@@ -157,3 +157,65 @@ def test_cli_choices_are_the_library_names():
 
     assert set(cli.EFFECTS) == set(LIBRARY)
     assert set(cli.CHANNELS) == set(TRANSLATIONAL)
+
+
+@pytest.fixture(scope="module")
+def rk4(tmp_path_factory):
+    """The shipped RK-4 run-up and its rotor file, and a folder for broken copies."""
+    from pathlib import Path
+
+    from sknarx.datasets import load_rk4_runup
+
+    root = Path(__file__).resolve().parents[1]
+    return (Path(load_rk4_runup().filename), root / "examples" / "rk4" / "rotor.toml",
+            tmp_path_factory.mktemp("rk4-errors"))
+
+
+def _broken_rotor(rk4, name, edit):
+    _, rotor, work = rk4
+    path = work / name
+    path.write_text(edit(rotor.read_text()))
+    return path
+
+
+@pytest.mark.parametrize("case, needles", [
+    ("no rotor", ("order-tracked (1x Bode) record", "model = 'beam'",
+                  "examples/rk4/rotor.toml")),
+    ("three revolutions", ("speed bin(s)", "at least 12", "wider speed range")),
+    ("negative speeds", ("speeds ('rpm') must be positive", "[measurement]")),
+    ("a disk without its mass", ("[[disks]] entry 1 lacks mass",)),
+    ("an unknown model", ("model = 'bem'", "'paper'", "'beam'")),
+    ("no shaft", ("needs a [shaft] section",)),
+    ("no probes", ("names no [[probes]]", "direction")),
+])
+def test_an_order_domain_record_or_its_rotor_file_wrong(rk4, case, needles, capsys, tmp_path):
+    """The order-domain front end (a 1x Bode record against a beam rotor file): each
+    mistake one line naming the fix, exit 2 -- before, a Bode file given without
+    ``--rotor`` ended in ``internal error (KeyError: 'shaft')`` and a three-revolution
+    record in LAPACK's 'SVD did not converge'."""
+    bode, rotor, _ = rk4
+    measured = bode
+    if case == "three revolutions":
+        measured = tmp_path / "short.csv"
+        pd.read_csv(bode).head(3).to_csv(measured, index=False)
+    if case == "negative speeds":
+        measured = tmp_path / "negative.csv"
+        d = pd.read_csv(bode)
+        d.assign(rpm=-d.rpm).to_csv(measured, index=False)
+    edits = {
+        "a disk without its mass": lambda t: t.replace("mass = 0.8", "", 1),
+        "an unknown model": lambda t: t.replace('model = "beam"', 'model = "bem"'),
+        "no shaft": lambda t: t.replace("[shaft]", "[shafts]"),
+        "no probes": lambda t: t[:t.index("[[probes]]")],
+    }
+    if case in edits:
+        rotor = _broken_rotor(rk4, case.replace(" ", "_") + ".toml", edits[case])
+    argv = ["gap", "--measured", str(measured), "--out", str(tmp_path / "out"), "-q"]
+    if case != "no rotor":
+        argv += ["--rotor", str(rotor)]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle.lower() in lines[0].lower(), (needle, lines[0])

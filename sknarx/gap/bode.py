@@ -38,7 +38,10 @@ def load_bode(path, measurement: dict) -> pd.DataFrame:
     amp = d[ac].to_numpy() * float(measurement.get("amplitude_scale", 1.0))
     ph = np.radians(d[pc].to_numpy())
     if np.any(rpm <= 0) or np.any(amp < 0):
-        raise ValueError("Speeds must be positive and amplitudes non-negative.")
+        raise ValueError(f"The Bode file's speeds ({sc!r}) must be positive and its "
+                         f"amplitudes ({ac!r}) non-negative; found speeds from {rpm.min():g} "
+                         f"and amplitudes from {amp.min():g}: check the columns the rotor "
+                         "file's [measurement] section names.")
     return pd.DataFrame({"rpm": rpm, "speed": rpm * RPM, "z": amp * np.exp(1j * ph)})
 
 

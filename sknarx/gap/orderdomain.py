@@ -57,6 +57,9 @@ SWEEP_LIMIT = 0.1  # sweep parameter above which a run-up is simulated, not take
 # the model is right; above 9 (p = exp(-9/2) ~ 0.011) the bin counts as disagreeing
 SIGNIFICANT_Z2 = 9.0
 BLOCK_BINS = 3  # training and held-out bins alternate in blocks of this many
+#: two training and two held-out blocks: the fewest bins on which a fit is judged where it
+#: interpolates between the speeds it saw
+MIN_BINS = 4 * BLOCK_BINS
 # why the other effects cannot be tested on a 1x order record, whatever the rig (a rotor
 # file's [report.untestable] adds what only its rig's owner knows)
 _METHOD_LIMITS = {
@@ -190,11 +193,20 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     settings = settings or ORDER_DOMAIN_SETTINGS
     rotor, info = beam_rotor_from_config(cfg)
     meas_cfg = info["measurement"]
+    if not info["probes"]:
+        raise ValueError("The rotor file names no [[probes]]: give the probe the record was "
+                         "taken at (name, position in m, direction 'x' or 'y').")
     probe = info["probes"][0]
     channel = probe.get("name", "probe")
     rows = load_bode(measured, meas_cfg)
     bins = bin_bode(rows)
     n = len(bins)
+    if n < MIN_BINS:
+        raise ValueError(
+            f"The Bode record spans {n} speed bin(s) ({rows.rpm.min():.0f}-"
+            f"{rows.rpm.max():.0f} rpm); at least {MIN_BINS} are needed, so that held-out "
+            f"blocks of {BLOCK_BINS} lie between training ones: give a record over a wider "
+            "speed range.")
     train = alternating_split(n, BLOCK_BINS)
     held = ~train
     mode = meas_cfg.get("response", "auto")

@@ -179,18 +179,45 @@ def _structure(rotor):
     return M, C, G, K
 
 
+def _entry(section: str, i: int | None, d: dict, *keys: str) -> list[float]:
+    """The numbers ``keys`` of one entry of a rotor file's ``section``, or an error that
+    names the entry and the key a user left out or mistyped."""
+    where = f"[{section}]" if i is None else f"[[{section}]] entry {i + 1}"
+    if not isinstance(d, dict):
+        raise ValueError(f"The rotor file's {where} must be a table of keys, got {d!r}.")
+    missing = [k for k in keys if k not in d]
+    if missing:
+        raise ValueError(f"The rotor file's {where} lacks {', '.join(missing)} (see "
+                         "examples/rk4/rotor.toml for a beam rotor file).")
+    try:
+        return [float(d[k]) for k in keys]
+    except (TypeError, ValueError):
+        raise ValueError(f"The rotor file's {where}: {', '.join(keys)} must be numbers, got "
+                         f"{[d[k] for k in keys]}.") from None
+
+
 def beam_rotor_from_config(cfg: dict) -> tuple[BeamRotor, dict]:
     """Build a :class:`BeamRotor` and the probe/measurement settings from a rotor file."""
+    if "shaft" not in cfg:
+        raise ValueError("A beam rotor file needs a [shaft] section (length, diameter; E, "
+                         "density and n_elements optional) with [[disks]], [[bearings]] and "
+                         "[[probes]]; see examples/rk4/rotor.toml.")
     sh = cfg["shaft"]
-    disks = tuple(Disk(position=float(d["position"]), mass=float(d["mass"]),
-                       diameter=float(d["diameter"]), thickness=float(d["thickness"]))
-                  for d in cfg.get("disks", []))
-    bearings = tuple(Bearing(position=float(b["position"]), kxx=float(b["kxx"]),
-                             kyy=float(b.get("kyy", b["kxx"])), cxx=float(b["cxx"]),
-                             cyy=float(b.get("cyy", b["cxx"])))
-                     for b in cfg.get("bearings", []))
+    length, diameter = _entry("shaft", None, sh, "length", "diameter")
+    disks = tuple(Disk(*_entry("disks", i, d, "position", "mass", "diameter", "thickness"))
+                  for i, d in enumerate(cfg.get("disks", [])))
+    bearings = []
+    for i, b in enumerate(cfg.get("bearings", [])):
+        # an isotropic bearing may give kxx and cxx alone
+        b = {"kyy": b.get("kxx"), "cyy": b.get("cxx"), **b} if isinstance(b, dict) else b
+        position, kxx, kyy, cxx, cyy = _entry("bearings", i, b, "position", "kxx", "kyy",
+                                              "cxx", "cyy")
+        bearings.append(Bearing(position=position, kxx=kxx, kyy=kyy, cxx=cxx, cyy=cyy))
+    bearings = tuple(bearings)
     probes = cfg.get("probes", [])
-    rotor = BeamRotor(length=float(sh["length"]), diameter=float(sh["diameter"]),
+    for i, pr in enumerate(probes):
+        _entry("probes", i, pr, "position")
+    rotor = BeamRotor(length=length, diameter=diameter,
                       E=float(sh.get("E", 2.0e11)), density=float(sh.get("density", 7850.0)),
                       n_elements=int(sh.get("n_elements", 28)), disks=disks, bearings=bearings,
                       extra_nodes=tuple(float(p["position"]) for p in probes))
