@@ -1,6 +1,7 @@
 """Gap diagnosis: features, gap map, file checks, and a fast blind subset end to end."""
 
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -1852,3 +1853,34 @@ def test_a_better_setting_found_by_the_recheck_is_decided_again():
     assert choice["_fit"] is better and choice["params"] == {"at": "B"}
     assert choice["setting_decided"] is True
     assert [r["params"] for r in ranked] == [{"at": "B"}, {"station": "A-O1"}]
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"no_gap_per_feature": -0.1}, "no_gap_per_feature must be a finite number in [0, inf)"),
+    ({"min_shrink": float("nan")}, "min_shrink must be a finite number"),
+    ({"pass_rtol": 1.0}, "pass_rtol must be a finite number in [0, 1)"),
+    ({"pair_margin": -1.0}, "pair_margin must be a finite number in [0, inf) or None"),
+    ({"n_probe": 0}, "n_probe must be a finite number in [1, inf)"),
+    ({"max_nfev": 7.5}, "max_nfev must be a whole number"),
+    ({"update_nominal": "yes"}, "update_nominal must be True or False"),
+    ({"order_floors_z2": (2.5, 1.8)}, "order_floors_z2 holds the 1x, 2x and 3x floors"),
+    ({"order_floors_z2": (2.5, 0.0, 1.8)}, "order_floors_z2 (2x) must be"),
+    ({"decided_setting_support": 0.0}, "decided_setting_support must be a finite number in (0, 1]"),
+    ({"n_jobs": 0}, "n_jobs must not be 0"),
+])
+def test_a_setting_out_of_its_range_is_named_when_the_settings_are_made(change, message):
+    """A settings object is read deep inside an hour-long diagnosis: a value out of its
+    range fails at once, naming the field and its range."""
+    with pytest.raises(ValueError, match="^DiagnosisSettings." + re.escape(message)):
+        DiagnosisSettings(**change)
+    with pytest.raises(ValueError, match="^DiagnosisSettings."):
+        replace(DiagnosisSettings(), **change)
+
+
+@given(st.fixed_dictionaries({
+    "no_gap_per_feature": st.floats(0.0, 10.0), "min_shrink": st.floats(-1.0, 1.0),
+    "pass_rtol": st.floats(0.0, 0.99), "n_probe": st.integers(1, 1024),
+    "pair_margin": st.none() | st.floats(0.0, 100.0),
+    "order_floors_z2": st.none() | st.tuples(*[st.floats(0.01, 10.0)] * 3)}))
+def test_every_setting_in_its_range_is_accepted(change):
+    assert replace(DiagnosisSettings(), **change).n_probe == change["n_probe"]

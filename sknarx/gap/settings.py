@@ -12,6 +12,8 @@ trial only if they match).
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
 
 __all__ = ["DiagnosisSettings", "ORDER_DOMAIN_SETTINGS", "SEARCH_FIELDS"]
@@ -27,7 +29,23 @@ SEARCH_FIELDS = ("pair_trigger", "pair_search_trigger", "n_partners", "max_nfev"
 
 @dataclass(frozen=True)
 class DiagnosisSettings:
-    """Frozen thresholds and search effort (docs/gap.md: where each was set)."""
+    """Frozen thresholds and search effort (docs/gap.md: where each was set).
+
+    Each value is checked when the settings are made: one out of its range (a negative
+    floor, a share of 1 or more, a count of 0, a NaN) raises a ``ValueError`` naming the
+    field and its range.
+
+    Examples
+    --------
+    >>> from dataclasses import replace
+    >>> from sknarx.gap import DiagnosisSettings
+    >>> replace(DiagnosisSettings(), pass_rtol=0.03).pass_rtol
+    0.03
+    >>> DiagnosisSettings(pass_rtol=1.5)
+    Traceback (most recent call last):
+    ...
+    ValueError: DiagnosisSettings.pass_rtol must be a finite number in [0, 1), got 1.5.
+    """
 
     # the verdict thresholds are fitted by benchmarks/bench_gap_blind.py and frozen here
     # (docs/gap.md, *Where the frozen settings come from*)
@@ -160,6 +178,92 @@ class DiagnosisSettings:
     n_jobs: int = 1  # candidates in sequence: each evaluation already uses both cores
     n_bootstrap: int = 200
     seed: int = 0
+
+    def __post_init__(self):
+        # a settings object is built once and read deep inside a long diagnosis: a value
+        # out of its range is named here, not found as a wrong verdict an hour later
+        for name, (low, high, closed, optional) in _RANGES.items():
+            _check_range(name, getattr(self, name), low, high, closed, optional)
+        for name in _INTEGERS:
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool)
+                                      or not isinstance(value, numbers.Integral)):
+                raise ValueError(f"DiagnosisSettings.{name} must be a whole number, got "
+                                 f"{value!r}.")
+        for name in _FLAGS:
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"DiagnosisSettings.{name} must be True or False, got "
+                                 f"{getattr(self, name)!r}.")
+        if self.n_jobs == 0:
+            raise ValueError("DiagnosisSettings.n_jobs must not be 0 (1: in sequence; -1: "
+                             "every core).")
+        floors = self.order_floors_z2
+        if floors is not None:
+            if len(floors) != 3:
+                raise ValueError("DiagnosisSettings.order_floors_z2 holds the 1x, 2x and 3x "
+                                 f"floors (three numbers) or is None, got {floors!r}.")
+            for order, value in zip(("1x", "2x", "3x"), floors, strict=True):
+                _check_range(f"order_floors_z2 ({order})", value, 0.0, math.inf,
+                             (False, False), False)
+
+
+def _check_range(name, value, low, high, closed, optional):
+    """Raise a ValueError naming ``name`` unless ``value`` is a finite number in the range
+    (``closed``: whether each end is allowed; ``optional``: None too)."""
+    if value is None and optional:
+        return
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and \
+        math.isfinite(value)
+    if ok:
+        ok = (value >= low if closed[0] else value > low) and \
+            (value <= high if closed[1] else value < high)
+    if not ok:
+        span = f"{'[' if closed[0] else '('}{low:g}, {high:g}{']' if closed[1] else ')'}"
+        raise ValueError(f"DiagnosisSettings.{name} must be a finite number in {span}"
+                         f"{' or None' if optional else ''}, got {value!r}.")
+
+
+_INF = math.inf
+#: each numeric field's range: (low, high, (low allowed, high allowed), None allowed)
+_RANGES = {
+    "no_gap_per_feature": (0.0, _INF, (True, False), False),
+    "min_shrink": (-_INF, 1.0, (False, True), False),
+    "min_log_shrink": (-_INF, 1.0, (False, True), False),
+    "pair_trigger": (0.0, _INF, (True, False), False),
+    "pair_gain": (0.0, 1.0, (True, True), False),
+    "pair_search_trigger": (0.0, _INF, (True, False), False),
+    "pair_margin": (0.0, _INF, (True, False), True),
+    "pair_rival_shrink": (-_INF, 1.0, (False, True), True),
+    "linear_form_gain": (0.0, 1.0, (True, True), True),
+    "n_partners": (0, _INF, (True, False), False),
+    "max_nfev": (1, _INF, (True, False), False),
+    "n_probe": (1, _INF, (True, False), False),
+    "probes_per_parameter": (1, _INF, (True, False), True),
+    "pair_probes_per_parameter": (1, _INF, (True, False), True),
+    "pair_short_starts": (0, _INF, (True, False), False),
+    "transient_s": (0.0, _INF, (True, False), False),
+    "settle_s": (0.0, _INF, (True, False), False),
+    "warm_lead_s": (0.0, _INF, (True, False), True),
+    "update_max_nfev": (1, _INF, (True, False), False),
+    "jacobian_refresh": (1, _INF, (True, False), True),
+    "settled_sigma": (0.0, _INF, (False, False), True),
+    "step_factor": (0.0, _INF, (False, False), False),
+    "decided_setting_support": (0.0, 1.0, (False, True), False),
+    "reading_contenders": (0, _INF, (True, False), False),
+    "pass_floor_sigmas": (-_INF, _INF, (False, False), False),
+    "pass_speed_rtol": (0.0, 1.0, (True, False), False),
+    "pass_rtol": (0.0, 1.0, (True, False), False),
+    "n_jobs": (-_INF, _INF, (False, False), False),
+    "n_bootstrap": (0, _INF, (True, False), False),
+    "seed": (0, _INF, (True, False), False),
+}
+#: the fields that count something
+_INTEGERS = ("n_partners", "max_nfev", "n_probe", "probes_per_parameter",
+             "pair_probes_per_parameter", "pair_short_starts", "update_max_nfev",
+             "jacobian_refresh", "reading_contenders", "n_jobs", "n_bootstrap", "seed")
+#: the switches
+_FLAGS = ("breadth_waived_at_floor", "attribute_below_floor", "update_nominal",
+          "update_spread")
 
 
 #: The order-domain front end's verdict rule (:mod:`sknarx.gap.orderdomain`). A 1x Bode
