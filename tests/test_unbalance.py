@@ -99,11 +99,13 @@ def test_trial_run_influence_coefficients_are_exact_on_linear_data(campaign):
 def test_scores():
     truth = np.array([[12, 0], [0, 30j]], dtype=complex)
     pred = np.array([[10, 1], [0, 30]], dtype=complex)
-    s = scores(pred, truth)
+    s = scores(pred, truth, 6.0, 24.0)
     assert s["mae_gmm"] == pytest.approx(0.75)
     assert s["detection"] == 1.0 and s["localisation"] == 1.0
     assert s["phase_error_deg"] == pytest.approx(90.0)
-    assert scores(pred, truth, decide_at=0.5)["localisation"] == 0.5
+    assert scores(pred, truth, 6.0, 24.0, decide_at=0.5)["localisation"] == 0.5
+    # where the phase is scored is the campaign's definition, not the library's
+    assert np.isnan(scores(pred, truth, 6.0, 31.0)["phase_error_deg"])
 
 
 def test_command_errors_are_one_line(tmp_path):
@@ -117,6 +119,30 @@ def test_command_errors_are_one_line(tmp_path):
                           load_rk4_unbalance().filename, "--rotor", str(toml), "--out",
                           str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert res.returncode == 2 and "no [[probes]] named" in res.stderr
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda t: t.replace("[unbalance]", "[unbalanced]"), "needs an [unbalance] section"),
+    (lambda t: t.replace("loaded_gmm = 6.0\n", ""), "[unbalance] section lacks loaded_gmm"),
+    (lambda t: t.replace('["A007", "A015"]', '["A007"]'), "names two conditions"),
+    (lambda t: t.replace('"A015"', '"Z999"'), "trial runs ['Z999'] are not conditions"),
+    (lambda t: t.replace('["A007", "A015"]', '["A015", "A007"]'),
+     "'A015' has no known unbalance on disk 1"),
+])
+def test_the_campaigns_scoring_and_trial_runs_come_from_the_rotor_file(
+        tmp_path, edit, needle, capsys):
+    """What counts as a loaded disk, where the phase is scored and which records are the
+    trial runs are the campaign's facts, in the rotor file's [unbalance] section: a
+    missing or wrong one is one line naming it, exit 2 (the last before any fit runs
+    long)."""
+    from sknarx import cli
+
+    toml = tmp_path / "r.toml"
+    toml.write_text(edit(ROTOR.read_text()))
+    assert cli.main(["unbalance", "--features", load_rk4_unbalance().filename, "--rotor",
+                     str(toml), "--out", str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0], err
 
 
 @pytest.mark.slow

@@ -36,7 +36,8 @@ from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import RPM
 
 __all__ = ["Campaign", "load_campaign", "RigInfluenceModel", "UnbalanceModel",
-           "influence_from_trial_runs", "scores", "cross_validate_conditions", "MIL_M",
+           "check_trial_runs", "influence_from_trial_runs", "scores",
+           "cross_validate_conditions", "MIL_M",
            "GMM_KGM"]
 
 logger = logging.getLogger(__name__)
@@ -232,12 +233,28 @@ class RigInfluenceModel:
         return best.x, float(best.cost)
 
 
+def check_trial_runs(campaign: Campaign, trial_runs) -> list[int]:
+    """The rows of ``campaign`` holding the trial runs, one per disk in disk order, or a
+    ``ValueError`` naming a run that is not in the campaign or has no known unbalance on
+    its disk."""
+    unknown = [c for c in trial_runs if c not in campaign.conditions]
+    if unknown:
+        raise ValueError(f"The trial runs {unknown} are not conditions of the campaign; name "
+                         "one labelled trial-mass run per disk of it.")
+    rows = [campaign.conditions.index(c) for c in trial_runs]
+    for d, (cid, i) in enumerate(zip(trial_runs, rows, strict=True)):
+        u = campaign.U[i, d]
+        if not np.isfinite(u) or u == 0:
+            raise ValueError(f"Trial run {cid!r} has no known unbalance on disk {d + 1}: "
+                             "name a labelled condition with a trial mass on that disk, in "
+                             "disk order.")
+    return rows
+
+
 def influence_from_trial_runs(campaign: Campaign, trial1: str, trial2: str) -> np.ndarray:
     """The classical influence-coefficient matrix from one trial-mass run per disk."""
-    cols = []
-    for d, cid in enumerate((trial1, trial2)):
-        i = campaign.conditions.index(cid)
-        cols.append(campaign.z[i] / campaign.U[i, d])
+    rows = check_trial_runs(campaign, (trial1, trial2))
+    cols = [campaign.z[i] / campaign.U[i, d] for d, i in enumerate(rows)]
     return np.stack(cols, axis=1)
 
 
@@ -369,7 +386,7 @@ class UnbalanceModel:
         return u, var, supp
 
 
-def scores(pred: np.ndarray, truth: np.ndarray, threshold=6.0, phase_from=24.0,
+def scores(pred: np.ndarray, truth: np.ndarray, threshold: float, phase_from: float,
            decide_at=None) -> dict:
     """The source's metrics on disk-points: MAE of |U| (g mm), detection accuracy (a disk
     is loaded when ``|U| >= threshold``), mean phase error (deg) where ``|U| >=
@@ -402,13 +419,16 @@ def _fold(model, campaign, condition, z, penalties):
 
 
 def cross_validate_conditions(model: UnbalanceModel, campaign: Campaign, penalties,
-                              thresholds, progress=None, n_jobs: int = 2) -> dict:
+                              thresholds, *, loaded_gmm: float, phase_from_gmm: float,
+                              progress=None, n_jobs: int = 2) -> dict:
     """Leave-one-condition-out predictions of every labelled condition.
 
     Each fold recalibrates the whole model (rotor, correction, noise) without the held-out
     condition (its repeats and both speeds leave together), warm-started from ``model``.
     The penalty and the detection threshold act only at prediction, so every pair of the
-    grids is scored on the same folds. ``n_jobs`` worker processes run the folds.
+    grids is scored on the same folds, by :func:`scores` with the campaign's definitions
+    (``loaded_gmm``: a disk is loaded from this unbalance; ``phase_from_gmm``: the phase
+    error counts from this one; both g mm). ``n_jobs`` worker processes run the folds.
 
     Returns
     -------
@@ -442,5 +462,6 @@ def cross_validate_conditions(model: UnbalanceModel, campaign: Campaign, penalti
            "variance": {p: np.array(v) for p, v in var.items()}, "scores": {}}
     for p in penalties:
         for t in thresholds:
-            out["scores"][(p, t)] = scores(preds[p], lab.U, threshold=6.0, decide_at=t)
+            out["scores"][(p, t)] = scores(preds[p], lab.U, loaded_gmm, phase_from_gmm,
+                                           decide_at=t)
     return out

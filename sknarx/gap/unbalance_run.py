@@ -19,21 +19,71 @@ from ..plotting import plt, save
 from .unbalance import (
     RigInfluenceModel,
     UnbalanceModel,
+    check_trial_runs,
     cross_validate_conditions,
     influence_from_trial_runs,
     load_campaign,
     scores,
 )
 
-__all__ = ["UnbalanceStudy", "identify_unbalance", "write_unbalance_outputs", "PENALTIES",
-           "THRESHOLDS"]
+__all__ = ["UnbalanceStudy", "CampaignScoring", "identify_unbalance",
+           "write_unbalance_outputs", "PENALTIES"]
 
 logger = logging.getLogger(__name__)
 
-#: Grids searched by leave-one-condition-out on the labelled conditions only.
+#: The penalties (chi-square cost of declaring a disk loaded) searched by
+#: leave-one-condition-out on the labelled conditions only.
 PENALTIES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0)
-THRESHOLDS = (3.5, 4.0, 4.5, 5.0, 5.5, 6.0)
-LOADED_GMM = 6.0  # the campaign's definition of a loaded disk
+
+
+@dataclass(frozen=True)
+class CampaignScoring:
+    """How a campaign is scored and which records the influence-coefficient peer uses:
+    the campaign's own definitions, given by the rotor file's ``[unbalance]`` section
+    (``examples/rk4/rotor.toml``), not by the library.
+
+    ``loaded_gmm``: a disk counts as loaded from this unbalance (g mm);
+    ``phase_from_gmm``: the phase error is scored where the applied unbalance reaches
+    this (g mm); ``trial_runs``: one labelled condition per disk with a trial mass on that
+    disk alone; ``thresholds_gmm``: the detection thresholds searched on the labelled
+    conditions (default: six from 7/12 of ``loaded_gmm`` up to it).
+    """
+
+    loaded_gmm: float
+    phase_from_gmm: float
+    trial_runs: tuple[str, str]
+    thresholds_gmm: tuple[float, ...]
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> CampaignScoring:
+        spec = cfg.get("unbalance")
+        example = ("e.g. [unbalance] loaded_gmm = 6.0, phase_from_gmm = 24.0, trial_runs = "
+                   "[\"A007\", \"A015\"] as in examples/rk4/rotor.toml")
+        if not isinstance(spec, dict):
+            raise ValueError("The rotor file needs an [unbalance] section: the campaign's "
+                             f"scoring and its trial runs ({example}).")
+        missing = [k for k in ("loaded_gmm", "phase_from_gmm", "trial_runs") if k not in spec]
+        if missing:
+            raise ValueError(f"The rotor file's [unbalance] section lacks {', '.join(missing)} "
+                             f"({example}).")
+        try:
+            loaded, phase_from = float(spec["loaded_gmm"]), float(spec["phase_from_gmm"])
+            thresholds = [float(t) for t in spec.get("thresholds_gmm", ())]
+        except (TypeError, ValueError):
+            raise ValueError("The rotor file's [unbalance] loaded_gmm, phase_from_gmm and "
+                             "thresholds_gmm must be numbers (g mm).") from None
+        runs = spec["trial_runs"]
+        if isinstance(runs, str) or len(runs) != 2:
+            raise ValueError("The rotor file's [unbalance] trial_runs names two conditions, "
+                             f"one trial-mass run per disk, got {runs!r}.")
+        if not loaded > 0 or not phase_from >= 0 or any(t <= 0 for t in thresholds):
+            raise ValueError("The rotor file's [unbalance] loaded_gmm and thresholds_gmm must "
+                             "be positive and phase_from_gmm not negative (g mm).")
+        # the campaign's own definition is always among the thresholds searched: the
+        # penalty is chosen at it
+        thresholds = thresholds or [loaded * k / 12 for k in range(7, 12)]
+        return cls(loaded, phase_from, (str(runs[0]), str(runs[1])),
+                   tuple(sorted({*thresholds, loaded})))
 
 
 def _ls_solve(H, z):
@@ -88,13 +138,24 @@ class UnbalanceStudy:
     U: np.ndarray
 
 
-def identify_unbalance(features, cfg: dict, trial_runs=("A007", "A015")) -> UnbalanceStudy:
+def identify_unbalance(features, cfg: dict) -> UnbalanceStudy:
     """Fit, cross-validate against the peers and predict the unlabelled conditions of a
-    campaign's 1x features; nothing is written."""
+    campaign's 1x features; nothing is written. ``cfg``: the rotor file, with the
+    campaign's scoring and trial runs in its ``[unbalance]`` section
+    (:class:`CampaignScoring`)."""
+    scoring = CampaignScoring.from_config(cfg)
     campaign = load_campaign(features)
+    try:  # before the long calibration: a wrong trial run is the rotor file's mistake
+        check_trial_runs(campaign, scoring.trial_runs)
+    except ValueError as exc:
+        raise ValueError(f"The rotor file's [unbalance] trial_runs: {exc}") from exc
+    n_lab = int(campaign.labeled.sum())
+    if n_lab < 4:
+        raise ValueError(f"The feature table holds {n_lab} labelled condition(s); the rotor "
+                         "model is calibrated and cross-validated on labelled ones: give at "
+                         "least 4.")
     probes = tuple(dict.fromkeys(p for _, p in campaign.channels))
     rig = RigInfluenceModel(cfg, campaign.speeds_rpm, probes)
-    n_lab = int(campaign.labeled.sum())
     logger.info("%d conditions (%d labelled) x %d channels; calibrating the rotor model "
                 "(%d parameters, %d starts)", len(campaign.conditions), n_lab,
                 len(campaign.channels), len(rig.names), rig.n_starts)
@@ -104,20 +165,22 @@ def identify_unbalance(features, cfg: dict, trial_runs=("A007", "A015")) -> Unba
                 100 * model.relative_residual_["rotor model"],
                 100 * model.relative_residual_["rotor model + correction"],
                 np.sqrt(model.tau2_))
-    cv = cross_validate_conditions(model, campaign, PENALTIES, THRESHOLDS)
+    loaded = scoring.loaded_gmm
+    cv = cross_validate_conditions(model, campaign, PENALTIES, scoring.thresholds_gmm,
+                                   loaded_gmm=loaded, phase_from_gmm=scoring.phase_from_gmm)
     # settings chosen on the labelled conditions only: the penalty for the lowest MAE,
     # then the detection threshold for the best detection at that penalty
-    best_p = min(PENALTIES, key=lambda p: cv["scores"][(p, LOADED_GMM)]["mae_gmm"])
-    best_t = max(THRESHOLDS, key=lambda t: (cv["scores"][(best_p, t)]["detection"], -abs(
-        t - LOADED_GMM)))
+    best_p = min(PENALTIES, key=lambda p: cv["scores"][(p, loaded)]["mae_gmm"])
+    best_t = max(scoring.thresholds_gmm, key=lambda t: (
+        cv["scores"][(best_p, t)]["detection"], -abs(t - loaded)))
     model.penalty = best_p
     logger.info("chosen on labelled data: penalty %.1f, decide loaded at %.1f g mm", best_p,
                 best_t)
-    peers, truth = _peers(campaign, trial_runs)
-    table_rows = {"model-based (this package)": scores(cv["predictions"][best_p], truth,
-                                                       LOADED_GMM, decide_at=best_t)}
+    peers, truth = _peers(campaign, scoring.trial_runs)
+    table_rows = {"model-based (this package)": scores(
+        cv["predictions"][best_p], truth, loaded, scoring.phase_from_gmm, decide_at=best_t)}
     for name, pred in peers.items():
-        table_rows[name] = scores(pred, truth, LOADED_GMM)
+        table_rows[name] = scores(pred, truth, loaded, scoring.phase_from_gmm)
 
     blind = campaign.subset(~campaign.labeled)
     U, var, supp = model.predict(blind)
@@ -135,7 +198,9 @@ def identify_unbalance(features, cfg: dict, trial_runs=("A007", "A015")) -> Unba
         "predictions": rows,
         "cross_validation": {"scheme": "leave one condition out (its repeats and both "
                              "speeds leave together)", "n_conditions": len(cv["conditions"]),
-                             "trial_runs": list(trial_runs),
+                             "trial_runs": list(scoring.trial_runs),
+                             "loaded_gmm": loaded,
+                             "phase_from_gmm": scoring.phase_from_gmm,
                              "methods": table_rows,
                              "grid": {f"penalty {p:g}, threshold {t:g}": v
                                       for (p, t), v in cv["scores"].items()}},
@@ -252,7 +317,8 @@ conditions). Standard errors include the mount-to-mount scatter of
 labelled conditions)</h2>
 <p>Each condition's repeats and both speeds leave together; every method is refitted
 without it. Metrics as in the source: mean absolute error of |U|, detection accuracy at
-{quantity(LOADED_GMM, 'g mm')}, phase error where |U| is at least 24 g mm, localisation (the
+{quantity(doc['cross_validation']['loaded_gmm'], 'g mm')}, phase error where |U| is at least
+{quantity(doc['cross_validation']['phase_from_gmm'], 'g mm')}, localisation (the
 set of loaded disks right). The influence coefficients come from the trial runs
 {', '.join(doc['cross_validation']['trial_runs'])}; when one of them is held out it still
 serves as its own trial run, as in the source's procedure.</p>
