@@ -96,6 +96,19 @@ def test_trial_run_influence_coefficients_are_exact_on_linear_data(campaign):
     np.testing.assert_allclose(influence_from_trial_runs(camp, "A007", "A015"), H)
 
 
+def test_the_probes_are_the_tables_own(campaign):
+    """No probe names are the library's: the table's ``<probe>_resp_re/_im`` pairs are its
+    probes, in column order, and a table without any is named as such."""
+    frame = load_rk4_unbalance().frame
+    assert [p for _, p in campaign.channels[:4]] == ["plane1_x", "plane1_y", "plane2_x",
+                                                      "plane2_y"]
+    renamed = frame.rename(columns=lambda c: c.replace("plane2_y", "probe_d"))
+    assert load_campaign(renamed).channels[3][1] == "probe_d"
+    bare = frame[[c for c in frame.columns if "_resp_" not in c]]
+    with pytest.raises(ValueError, match="no probe columns '<probe>_resp_re'"):
+        load_campaign(bare)
+
+
 def test_scores():
     truth = np.array([[12, 0], [0, 30j]], dtype=complex)
     pred = np.array([[10, 1], [0, 30]], dtype=complex)

@@ -75,22 +75,31 @@ class Campaign:
                        block=self.block[mask], n_records=self.n_records[mask])
 
 
-def load_campaign(source, probes=("plane1_x", "plane1_y", "plane2_x", "plane2_y"),
-                  response="resp") -> Campaign:
+def load_campaign(source, probes=None, response="resp") -> Campaign:
     """Read a 1x feature table (``sknarx.datasets.load_rk4_unbalance`` format).
 
     Parameters
     ----------
     source : path or DataFrame
         One row per record with ``condition_id``, ``speed_id``, ``rpm``, ``labeled``,
-        ``block``, ``U1_re/_im``, ``U2_re/_im`` (g mm) and ``<probe>_<response>_re/_im``.
-    probes : sequence of str
+        ``block`` (``'baseline'`` for the balanced reference records, which no fold
+        scores), ``U1_re/_im``, ``U2_re/_im`` (g mm) and ``<probe>_<response>_re/_im``.
+    probes : sequence of str, optional
+        The probes to read; default: every probe the table has both columns of.
     response : str
         ``'resp'`` (the change from the balanced baseline) or ``'1x'``.
     """
     from ..io import read_table
 
     df = source if isinstance(source, pd.DataFrame) else read_table(source, "feature table")
+    if probes is None:
+        tail = f"_{response}_re"
+        probes = [c[: -len(tail)] for c in df.columns
+                  if c.endswith(tail) and f"{c[: -len(tail)]}_{response}_im" in df.columns]
+        if not probes:
+            raise ValueError(f"The feature table has no probe columns '<probe>{tail}' and "
+                             f"'<probe>_{response}_im' (found {list(df.columns)[:8]}...); see "
+                             "sknarx.datasets.load_rk4_unbalance for the format.")
     need = ["condition_id", "speed_id", "rpm", "labeled", "block", "U1_re", "U1_im", "U2_re",
             "U2_im"] + [f"{p}_{response}_{part}" for p in probes for part in ("re", "im")]
     missing = [c for c in need if c not in df.columns]
