@@ -134,6 +134,25 @@ def test_command_errors_are_one_line(tmp_path):
     assert res.returncode == 2 and "no [[probes]] named" in res.stderr
 
 
+@pytest.mark.slow
+def test_a_campaign_of_labelled_conditions_only_is_cross_validated_with_nothing_to_predict(
+        tmp_path, capsys):
+    """Two labelled trial runs and no unlabelled condition: the command cross-validates,
+    writes an empty prediction table and says so in the report (it ended in matplotlib's
+    'Number of rows must be a positive integer, not 0')."""
+    from sknarx import cli
+
+    frame = pd.read_csv(load_rk4_unbalance().filename)
+    path = tmp_path / "two.csv"
+    frame[frame.condition_id.isin(["A007", "A015"])].to_csv(path, index=False)
+    out = tmp_path / "o"
+    assert cli.main(["unbalance", "--features", str(path), "--rotor", str(ROTOR), "--out",
+                     str(out), "-q"]) == 0
+    assert "on 2 labelled conditions" in capsys.readouterr().out
+    assert len(pd.read_csv(out / "predictions.csv")) == 0
+    assert "no unlabelled condition: nothing to predict" in (out / "report.html").read_text()
+
+
 @pytest.mark.parametrize("edit, needle", [
     (lambda t: t.replace("[unbalance]", "[unbalanced]"), "needs an [unbalance] section"),
     (lambda t: t.replace("loaded_gmm = 6.0\n", ""), "[unbalance] section lacks loaded_gmm"),

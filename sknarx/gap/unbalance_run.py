@@ -149,13 +149,18 @@ def identify_unbalance(features, cfg: dict) -> UnbalanceStudy:
         check_trial_runs(campaign, scoring.trial_runs)
     except ValueError as exc:
         raise ValueError(f"The rotor file's [unbalance] trial_runs: {exc}") from exc
-    n_lab = int(campaign.labeled.sum())
-    if n_lab < 4:
-        raise ValueError(f"The feature table holds {n_lab} labelled condition(s); the rotor "
-                         "model is calibrated and cross-validated on labelled ones: give at "
-                         "least 4.")
     probes = tuple(dict.fromkeys(p for _, p in campaign.channels))
     rig = RigInfluenceModel(cfg, campaign.speeds_rpm, probes)
+    n_lab = int(campaign.labeled.sum())
+    # each fold calibrates the rotor model without one labelled condition: what is left
+    # must hold more numbers (two per complex channel) than the model has parameters
+    per_condition = 2 * len(campaign.channels)
+    if (n_lab - 1) * per_condition <= len(rig.names):
+        need = len(rig.names) // per_condition + 2
+        raise ValueError(f"The feature table holds {n_lab} labelled condition(s) of "
+                         f"{len(campaign.channels)} channels; the rotor model's "
+                         f"{len(rig.names)} parameters are calibrated without each in turn: "
+                         f"give at least {need}.")
     logger.info("%d conditions (%d labelled) x %d channels; calibrating the rotor model "
                 "(%d parameters, %d starts)", len(campaign.conditions), n_lab,
                 len(campaign.channels), len(rig.names), rig.n_starts)
@@ -215,7 +220,11 @@ def identify_unbalance(features, cfg: dict) -> UnbalanceStudy:
                                             np.sqrt(model.sigma2_).tolist(), strict=True))},
         "speeds_rpm": campaign.speeds_rpm,
     }
-    return UnbalanceStudy(document=doc, predictions=pd.DataFrame(rows), model=model,
+    # the columns stated, so a campaign with nothing to predict still writes its header
+    columns = ["condition_id", "disk", "U_gmm", "angle_deg", "loaded", "U_std_gmm",
+               "angle_std_deg"]
+    return UnbalanceStudy(document=doc, predictions=pd.DataFrame(rows, columns=columns),
+                          model=model,
                           rig=rig, campaign=campaign, blind=blind, U=U)
 
 
@@ -237,6 +246,8 @@ def _figures(out, model, blind, U):
     H = model.H_
     chans = model.channels_
     n = len(blind.conditions)
+    if n == 0:  # a campaign of labelled conditions only: cross-validated, nothing to draw
+        return {}
     cols = 5
     fig, axes = plt.subplots(int(np.ceil(n / cols)), cols, figsize=(3 * cols,
                                                                      3 * np.ceil(n / cols)),
@@ -311,7 +322,8 @@ def _html(doc, figs, rig, campaign):
 estimate reaches {quantity(chosen['loaded_threshold_gmm'], 'g mm')} (chosen on the labelled
 conditions). Standard errors include the mount-to-mount scatter of
 {quantity(doc['noise']['mount_scatter_gmm'], 'g mm')}.</p>
-{table(pred_rows, ['condition', 'disk', '|U|', 'angle', 'loaded', 'std |U|', 'std angle'])}
+{table(pred_rows, ['condition', 'disk', '|U|', 'angle', 'loaded', 'std |U|', 'std angle'])
+ if pred_rows else '<p>The feature table holds no unlabelled condition: nothing to predict.</p>'}
 {''.join(figure(p) for p in figs.values())}
 <h2>Leave-one-condition-out cross-validation ({doc['cross_validation']['n_conditions']}
 labelled conditions)</h2>
