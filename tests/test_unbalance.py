@@ -207,3 +207,19 @@ def test_the_documented_command_and_its_cross_validated_figures(tmp_path):
 
 #: measured on the committed code (docs/rk4.md): leave-one-condition-out, 84 conditions
 MEASURED_LOCO_MAE = 4.95
+
+
+def test_too_few_labelled_conditions_for_the_rotor_models_parameters_are_named(
+        tmp_path, capsys):
+    """Two trial runs at one speed: 4 channels, 8 numbers per condition, and each fold
+    left with one condition for 13 parameters."""
+    from sknarx import cli
+
+    frame = pd.read_csv(load_rk4_unbalance().filename)
+    path = tmp_path / "two_n1.csv"
+    frame[frame.condition_id.isin(["A007", "A015"]) & (frame.speed_id == "N1")].to_csv(
+        path, index=False)
+    assert cli.main(["unbalance", "--features", str(path), "--rotor", str(ROTOR), "--out",
+                     str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "2 labelled condition(s) of 4 channels" in err and "give at least 3" in err
