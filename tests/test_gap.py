@@ -1884,3 +1884,14 @@ def test_a_setting_out_of_its_range_is_named_when_the_settings_are_made(change, 
     "order_floors_z2": st.none() | st.tuples(*[st.floats(0.01, 10.0)] * 3)}))
 def test_every_setting_in_its_range_is_accepted(change):
     assert replace(DiagnosisSettings(), **change).n_probe == change["n_probe"]
+
+
+def test_every_setting_has_its_range_checked():
+    """A field added to DiagnosisSettings without a range would go unchecked."""
+    from dataclasses import fields
+
+    from sknarx.gap import settings as mod
+
+    checked = set(mod._RANGES) | set(mod._FLAGS) | {"order_floors_z2"}
+    assert {f.name for f in fields(DiagnosisSettings)} == checked
+    assert set(mod._INTEGERS) <= set(mod._RANGES)

@@ -224,38 +224,36 @@ def _check_range(name, value, low, high, closed, optional):
 
 
 _INF = math.inf
-#: each numeric field's range: (low, high, (low allowed, high allowed), None allowed)
+# ranges as (low, high, (low allowed, high allowed), None allowed)
+_AT_LEAST_0 = (0.0, _INF, (True, False), False)
+_POSITIVE = (0.0, _INF, (False, False), False)
+_AT_LEAST_1 = (1, _INF, (True, False), False)
+_AT_MOST_1 = (-_INF, 1.0, (False, True), False)
+_SHARE = (0.0, 1.0, (True, True), False)
+_SHARE_BELOW_1 = (0.0, 1.0, (True, False), False)
+_FINITE = (-_INF, _INF, (False, False), False)
+
+
+def _or_none(span):
+    return (*span[:3], True)
+
+
+#: each numeric field's range
 _RANGES = {
-    "no_gap_per_feature": (0.0, _INF, (True, False), False),
-    "min_shrink": (-_INF, 1.0, (False, True), False),
-    "min_log_shrink": (-_INF, 1.0, (False, True), False),
-    "pair_trigger": (0.0, _INF, (True, False), False),
-    "pair_gain": (0.0, 1.0, (True, True), False),
-    "pair_search_trigger": (0.0, _INF, (True, False), False),
-    "pair_margin": (0.0, _INF, (True, False), True),
-    "pair_rival_shrink": (-_INF, 1.0, (False, True), True),
-    "linear_form_gain": (0.0, 1.0, (True, True), True),
-    "n_partners": (0, _INF, (True, False), False),
-    "max_nfev": (1, _INF, (True, False), False),
-    "n_probe": (1, _INF, (True, False), False),
-    "probes_per_parameter": (1, _INF, (True, False), True),
-    "pair_probes_per_parameter": (1, _INF, (True, False), True),
-    "pair_short_starts": (0, _INF, (True, False), False),
-    "transient_s": (0.0, _INF, (True, False), False),
-    "settle_s": (0.0, _INF, (True, False), False),
-    "warm_lead_s": (0.0, _INF, (True, False), True),
-    "update_max_nfev": (1, _INF, (True, False), False),
-    "jacobian_refresh": (1, _INF, (True, False), True),
-    "settled_sigma": (0.0, _INF, (False, False), True),
-    "step_factor": (0.0, _INF, (False, False), False),
-    "decided_setting_support": (0.0, 1.0, (False, True), False),
-    "reading_contenders": (0, _INF, (True, False), False),
-    "pass_floor_sigmas": (-_INF, _INF, (False, False), False),
-    "pass_speed_rtol": (0.0, 1.0, (True, False), False),
-    "pass_rtol": (0.0, 1.0, (True, False), False),
-    "n_jobs": (-_INF, _INF, (False, False), False),
-    "n_bootstrap": (0, _INF, (True, False), False),
-    "seed": (0, _INF, (True, False), False),
+    "no_gap_per_feature": _AT_LEAST_0, "min_shrink": _AT_MOST_1,
+    "min_log_shrink": _AT_MOST_1, "pair_trigger": _AT_LEAST_0, "pair_gain": _SHARE,
+    "pair_search_trigger": _AT_LEAST_0, "pair_margin": _or_none(_AT_LEAST_0),
+    "pair_rival_shrink": _or_none(_AT_MOST_1), "linear_form_gain": _or_none(_SHARE),
+    "n_partners": _AT_LEAST_0, "max_nfev": _AT_LEAST_1, "n_probe": _AT_LEAST_1,
+    "probes_per_parameter": _or_none(_AT_LEAST_1),
+    "pair_probes_per_parameter": _or_none(_AT_LEAST_1), "pair_short_starts": _AT_LEAST_0,
+    "transient_s": _AT_LEAST_0, "settle_s": _AT_LEAST_0,
+    "warm_lead_s": _or_none(_AT_LEAST_0), "update_max_nfev": _AT_LEAST_1,
+    "jacobian_refresh": _or_none(_AT_LEAST_1), "settled_sigma": _or_none(_POSITIVE),
+    "step_factor": _POSITIVE, "decided_setting_support": (0.0, 1.0, (False, True), False),
+    "reading_contenders": _AT_LEAST_0, "pass_floor_sigmas": _FINITE,
+    "pass_speed_rtol": _SHARE_BELOW_1, "pass_rtol": _SHARE_BELOW_1, "n_jobs": _FINITE,
+    "n_bootstrap": _AT_LEAST_0, "seed": _AT_LEAST_0,
 }
 #: the fields that count something
 _INTEGERS = ("n_partners", "max_nfev", "n_probe", "probes_per_parameter",
