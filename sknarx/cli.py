@@ -244,7 +244,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="1x feature table (.csv or .parquet), one row per record, as "
                    "sknarx.datasets.load_rk4_unbalance")
     u.add_argument("--rotor", required=True,
-                   help="rotor file (.toml) with a [[probes]] entry per probe of the table")
+                   help="rotor file (.toml) with a [[probes]] entry per probe of the table "
+                   "and an [unbalance] section: the campaign's loaded_gmm, phase_from_gmm "
+                   "and trial_runs (see examples/rk4/rotor.toml)")
     u.add_argument("--out", required=True, help="output folder (created)")
     u.set_defaults(func=_unbalance)
     return parser

@@ -5,17 +5,54 @@ from __future__ import annotations
 
 import csv
 import logging
+import os
+import tempfile
 from pathlib import Path
 
 import pandas as pd
 
 from ._json import json_safe
 
-__all__ = ["read_table", "model_to_json", "model_from_json", "json_safe"]
+__all__ = ["read_table", "write_atomic", "write_text_atomic", "model_to_json",
+           "model_from_json", "json_safe"]
 
 logger = logging.getLogger(__name__)
 
 TABLE_SUFFIXES = (".csv", ".parquet")
+
+
+def write_atomic(path, write) -> Path:
+    """Write ``path`` whole or not at all: ``write(tmp)`` writes a temporary file beside
+    it, which then replaces ``path`` in one step. A run stopped mid-write (killed, out of
+    disk) leaves the previous file or none, never a truncated one a later run would
+    read. Returns ``path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from sknarx.io import write_atomic
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = write_atomic(Path(d) / "a.txt", lambda tmp: Path(tmp).write_text("x"))
+    ...     path.read_text(), sorted(p.name for p in Path(d).iterdir())
+    ('x', ['a.txt'])
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name, suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def write_text_atomic(path, text: str) -> Path:
+    """:func:`write_atomic` of a text (UTF-8)."""
+    return write_atomic(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
 def read_table(path, what="table", nrows=None) -> pd.DataFrame:

@@ -11,6 +11,8 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from .io import write_atomic  # noqa: E402
+
 __all__ = ["plt", "save", "to_data_uri", "correlation_tests_figure"]
 
 plt.rcParams.update({
@@ -25,10 +27,8 @@ plt.rcParams.update({
 
 def save(fig, path) -> Path:
     """Write ``fig`` as PNG and close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    path = write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
     return path
 

@@ -2,6 +2,7 @@
 
 import math
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -71,3 +72,21 @@ def test_a_verdict_naming_runout_says_a_bent_shaft_reads_the_same():
     assert "a speed measured again after the sweep" in alone
     assert alike_text(["crack", "runout"]) == alone
     assert alike_text("crack") == "" and not EFFECTS["crack"].alike
+
+
+def test_an_output_is_written_whole_or_not_at_all(tmp_path):
+    """A run stopped mid-write leaves the previous file and no temporary beside it: every
+    report, table and figure goes through io.write_atomic."""
+    from sknarx.io import write_atomic, write_text_atomic
+
+    path = write_text_atomic(tmp_path / "out" / "diagnosis.json", '{"verdict": "no-gap"}')
+
+    def dies_halfway(tmp):
+        with open(tmp, "w") as f:
+            f.write('{"verd')
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(path, dies_halfway)
+    assert path.read_text() == '{"verdict": "no-gap"}'
+    assert [p.name for p in path.parent.iterdir()] == ["diagnosis.json"]

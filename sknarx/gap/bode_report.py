@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from .._report import figure, page, provenance, quantity, table, value_range
-from ..io import json_safe
+from ..io import json_safe, write_atomic, write_text_atomic
 from ..plotting import plt, save
 from .report import alike_text, closest_text
 
@@ -27,12 +27,13 @@ def write_bode_outputs(result, out, command: str) -> dict:
     doc = json_safe(dict(result))
     prov = provenance(command)
     doc.update(sknarx_version=prov["sknarx_version"], command=command, provenance=prov)
-    _bode_fit_table(c["rows"], c["bins"], c["nominal"], c["calibrated"], c["corrected"],
-                    c["measurement"]).to_csv(out / "bode_fit.csv", index=False)
+    fit = _bode_fit_table(c["rows"], c["bins"], c["nominal"], c["calibrated"],
+                          c["corrected"], c["measurement"])
+    write_atomic(out / "bode_fit.csv", lambda tmp: fit.to_csv(tmp, index=False))
     figs = figures(out, c["bins"], c["nominal"], c["calibrated"], c["corrected"], doc,
                    c["quasi_steady"], z2=c["z2"], label=c["corrected_label"])
-    (out / "diagnosis.json").write_text(json.dumps(doc, indent=1))
-    (out / "report.html").write_text(html_report(doc, figs))
+    write_text_atomic(out / "diagnosis.json", json.dumps(doc, indent=1))
+    write_text_atomic(out / "report.html", html_report(doc, figs))
     return doc
 
 

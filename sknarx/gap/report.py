@@ -10,7 +10,7 @@ from statistics import NormalDist
 import numpy as np
 
 from .._report import at_bound, figure, page, provenance, quantity, table, value_range
-from ..io import json_safe
+from ..io import json_safe, write_atomic, write_text_atomic
 from ..plotting import plt, save
 from ..rotor import EFFECTS
 from .calibration import NUISANCE_UNITS
@@ -46,7 +46,7 @@ def heatmap(cmp, path, title):
                 ax.set_xlabel("speed (rad/s)", fontsize=8)
     fig.colorbar(im, ax=axes, shrink=0.6, label="log10(1 + z^2)")
     fig.suptitle(title)
-    fig.savefig(path, dpi=110)
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
     return Path(path)
 
@@ -77,8 +77,8 @@ def write_gap_outputs(result, out, command: str, narx: dict | None = None) -> di
     doc["provenance"] = prov
     if narx is not None:
         doc["narx"] = json_safe(narx)
-    (out / "diagnosis.json").write_text(json.dumps(doc, indent=1))
-    (out / "report.html").write_text(_html(doc, figs, prov))
+    write_text_atomic(out / "diagnosis.json", json.dumps(doc, indent=1))
+    write_text_atomic(out / "report.html", _html(doc, figs, prov))
     return doc
 
 

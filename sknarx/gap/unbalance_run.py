@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from .._report import figure, page, provenance, quantity, table
-from ..io import json_safe
+from ..io import json_safe, write_atomic, write_text_atomic
 from ..plotting import plt, save
 from .unbalance import (
     RigInfluenceModel,
@@ -233,11 +233,12 @@ def write_unbalance_outputs(study: UnbalanceStudy, out, command: str) -> dict:
     provenance) and ``report.html`` with its figure into ``out``; returns the document."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    study.predictions.to_csv(out / "predictions.csv", index=False)
+    write_atomic(out / "predictions.csv",
+                 lambda tmp: study.predictions.to_csv(tmp, index=False))
     doc = json_safe({**study.document, "provenance": provenance(command)})
-    (out / "unbalance.json").write_text(json.dumps(doc, indent=1))
+    write_text_atomic(out / "unbalance.json", json.dumps(doc, indent=1))
     figs = _figures(out, study.model, study.blind, study.U)
-    (out / "report.html").write_text(_html(doc, figs, study.rig, study.campaign))
+    write_text_atomic(out / "report.html", _html(doc, figs, study.rig, study.campaign))
     return doc
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from .._report import figure, page, provenance, table
-from ..io import json_safe
+from ..io import json_safe, write_atomic, write_text_atomic
 from ..narx.validity import validity_summary
 from ..rotor import RotorBearingSimulator
 from .figures import MODEL_STYLE, make_figures
@@ -90,21 +90,24 @@ def write_outputs(st, out, command: str) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     figs = make_figures(st, out)
     rec = st.models[RECOMMENDED]
-    table3(rec).to_csv(out / "table3_terms_aerr.csv", index=False)
-    table4(st.models["improved"]).to_csv(out / "table4_coefficient_functions.csv", index=False)
-    table3(st.models["paper"]).to_csv(out / "table3_paper_method.csv", index=False)
-    table4(st.models["paper"]).to_csv(out / "table4_paper_method.csv", index=False)
+
+    def csv(table, name):
+        write_atomic(out / name, lambda tmp: table.to_csv(tmp, index=False))
+
+    csv(table3(rec), "table3_terms_aerr.csv")
+    csv(table4(st.models["improved"]), "table4_coefficient_functions.csv")
+    csv(table3(st.models["paper"]), "table3_paper_method.csv")
+    csv(table4(st.models["paper"]), "table4_paper_method.csv")
     for name, m in st.models.items():
-        m.to_json(out / f"model_{name}.json")
-        m.summary().to_csv(out / f"summary_{name}.csv", index=False)
-        m.summary(kind="speed_function").to_csv(out / f"speed_function_{name}.csv",
-                                                index=False)
+        write_text_atomic(out / f"model_{name}.json", m.to_json())
+        csv(m.summary(), f"summary_{name}.csv")
+        csv(m.summary(kind="speed_function"), f"speed_function_{name}.csv")
     for name, t in st.validity.items():
-        t.to_csv(out / f"validity_tests_{name}.csv", index=False)
-    rec.to_json(out / "model.json")
+        csv(t, f"validity_tests_{name}.csv")
+    write_text_atomic(out / "model.json", rec.to_json())
     m = metrics(st, command)
-    (out / "metrics.json").write_text(json.dumps(m, indent=1))
-    (out / "report.html").write_text(_html(st, m, figs))
+    write_text_atomic(out / "metrics.json", json.dumps(m, indent=1))
+    write_text_atomic(out / "report.html", _html(st, m, figs))
     return m
 
 

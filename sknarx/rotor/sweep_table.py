@@ -11,11 +11,11 @@ carries its settings in the parquet key-value metadata; a ``.csv`` file gets a
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import pandas as pd
+
+from ..io import write_atomic
 
 __all__ = ["save_sweep", "load_sweep", "SweepStore"]
 
@@ -28,18 +28,6 @@ def _have_parquet() -> bool:
     except ImportError:
         return False
     return True
-
-
-def _atomic_write(path: Path, write):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name, suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def save_sweep(df: pd.DataFrame, path, settings: dict | None = None):
@@ -58,11 +46,11 @@ def save_sweep(df: pd.DataFrame, path, settings: dict | None = None):
             meta[_META_KEY] = json.dumps(settings).encode()
             pq.write_table(table.replace_schema_metadata(meta), tmp)
 
-        _atomic_write(path, write)
+        write_atomic(path, write)
     elif path.suffix == ".csv":
-        _atomic_write(path, lambda tmp: df.to_csv(tmp, index=False, float_format="%.17g"))
+        write_atomic(path, lambda tmp: df.to_csv(tmp, index=False, float_format="%.17g"))
         side = path.with_name(path.name + ".settings.json")
-        _atomic_write(side, lambda tmp: Path(tmp).write_text(json.dumps(settings, indent=1)))
+        write_atomic(side, lambda tmp: Path(tmp).write_text(json.dumps(settings, indent=1)))
     else:
         raise ValueError(f"Unknown sweep file type {path.suffix!r}: use .parquet or .csv.")
 
@@ -112,7 +100,7 @@ class SweepStore:
                     "directory or delete it to start over."
                 )
         else:
-            _atomic_write(meta, lambda tmp: Path(tmp).write_text(json.dumps(settings, indent=1)))
+            write_atomic(meta, lambda tmp: Path(tmp).write_text(json.dumps(settings, indent=1)))
 
     def done(self, speed: float) -> bool:
         return self._file(speed).exists()
