@@ -1,6 +1,7 @@
 """The shared report helpers: quantities with units, bound flags, provenance, empty tables."""
 
 import math
+import os
 
 import pytest
 from hypothesis import given
@@ -90,3 +91,7 @@ def test_an_output_is_written_whole_or_not_at_all(tmp_path):
         write_atomic(path, dies_halfway)
     assert path.read_text() == '{"verdict": "no-gap"}'
     assert [p.name for p in path.parent.iterdir()] == ["diagnosis.json"]
+    # readable as a plain write would have left it (mkstemp's files are private)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
