@@ -299,6 +299,10 @@ def test_inflating_a_harmonic_never_widens_its_own_tolerance(scale):
         (lambda d: d.assign(xO1=np.where(d.index == 5, np.nan, d.xO1)), "NaN"),
         (lambda d: d[d.speed < 150], "at least 4"),
         (lambda d: d.rename(columns={"xO1": "probe1"}), "No measured channel.*after its DOF"),
+        (lambda d: d.assign(speed=d.speed * 60 / (2 * np.pi)),
+         r"speed column looks like rpm. Give it in rad/s \(rpm / 9.5493\)"),
+        (lambda d: d.assign(t=np.where(d.speed == 160.0, 2 * d.t, d.t)),
+         r"one sampling rate \(.*500 Hz at 160 rad/s.*\); resample them to one rate"),
         (lambda d: pd.concat([d, d[d.speed == 120.0]], ignore_index=True),
          "more than one record"),
     ],
@@ -1895,3 +1899,24 @@ def test_every_setting_has_its_range_checked():
     checked = set(mod._RANGES) | set(mod._FLAGS) | {"order_floors_z2"}
     assert {f.name for f in fields(DiagnosisSettings)} == checked
     assert set(mod._INTEGERS) <= set(mod._RANGES)
+
+
+@given(st.lists(st.floats(30.0, 1500.0), min_size=4, max_size=6, unique=True),
+       st.sampled_from([500.0, 1000.0, 2000.0]), st.integers(256, 4096),
+       st.floats(0.0, 0.5), st.integers(0, 2**16))
+def test_a_sweep_in_rad_s_is_never_taken_for_rpm(speeds, fs, n, harmonic, seed):
+    """Whatever its speeds, rate, length, 2x content and noise, a sweep whose 1x is its
+    strongest line passes the speed-unit check (it may fail others, never that one)."""
+    speeds = [w for w in speeds if w / (2 * np.pi) < 0.45 * fs]
+    if len(speeds) < 4:
+        return
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    table = pd.concat([pd.DataFrame({
+        "speed": w, "t": t,
+        "xO1": 1e-5 * np.cos(w * t) + harmonic * 1e-5 * np.cos(2 * w * t + 1.0)
+        + 1e-7 * rng.standard_normal(n)}) for w in speeds], ignore_index=True)
+    try:
+        check_measured(table)
+    except ValueError as exc:
+        assert "rpm" not in str(exc), exc

@@ -82,8 +82,43 @@ def check_measured(df: pd.DataFrame, channels=None):
         sizes.append(len(g))
         rates.append(1.0 / np.mean(dt))
     if np.ptp(rates) > 1e-6 * np.mean(rates):
-        raise ValueError("All speed steps must share one sampling rate.")
+        by_rate = ", ".join(f"{r:g} Hz at {w:g} rad/s" for w, r in zip(speeds, rates,
+                                                                        strict=True))
+        raise ValueError(f"All speed steps must share one sampling rate ({by_rate}); "
+                         "resample them to one rate.")
     n = int(min(sizes))
     df = df.groupby("speed", group_keys=False).head(n).reset_index(drop=True)
-    return df, {"channels": list(channels), "speeds": speeds.tolist(), "fs": float(rates[0]),
+    fs = float(rates[0])
+    _check_speed_unit(df, channels, fs, n)
+    return df, {"channels": list(channels), "speeds": speeds.tolist(), "fs": fs,
                 "n_samples": n}
+
+
+#: rpm per rad/s: a speed column in rpm reads this much too high as rad/s
+_RPM_PER_RAD_S = 60.0 / (2.0 * np.pi)
+
+
+def _check_speed_unit(df, channels, fs, n):
+    """A speed column in rpm, the usual unit of a rig's tachometer, is the mistake a
+    diagnosis in rad/s would run an hour on and blame an effect for: every step's 1x
+    would be modelled 9.55 times too fast. The records show it: their strongest line then
+    sits at speed/60 Hz rather than at speed/(2 pi) Hz. Called when that holds at most
+    steps where the two are more than two frequency bins apart (a record's resolution)."""
+    bin_hz = fs / n
+    votes, told = 0, 0
+    for w, g in df.groupby("speed"):
+        as_rad_s, as_rpm = w / (2.0 * np.pi), w / 60.0
+        if as_rad_s > fs / 2 or abs(as_rad_s - as_rpm) <= 2 * bin_hz:
+            continue
+        x = g[list(channels)].to_numpy()
+        power = (np.abs(np.fft.rfft(x - x.mean(axis=0), axis=0)) ** 2).sum(axis=1)
+        power[0] = 0.0
+        peak = np.argmax(power) * bin_hz
+        told += 1
+        votes += abs(peak - as_rpm) <= bin_hz and abs(peak - as_rad_s) > bin_hz
+    if told and votes >= max(2, 0.75 * told):
+        raise ValueError(
+            f"The records' strongest line sits at speed/60 Hz at {votes} of {told} speed "
+            f"steps, not at speed/(2 pi) Hz: the speed column looks like rpm. Give it in "
+            f"rad/s (rpm / {_RPM_PER_RAD_S:.4f}).")
+
