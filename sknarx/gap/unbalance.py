@@ -245,7 +245,20 @@ class RigInfluenceModel:
 def check_trial_runs(campaign: Campaign, trial_runs) -> list[int]:
     """The rows of ``campaign`` holding the trial runs, one per disk in disk order, or a
     ``ValueError`` naming a run that is not in the campaign or has no known unbalance on
-    its disk."""
+    its disk.
+
+    Examples
+    --------
+    >>> from sknarx.datasets import load_rk4_unbalance
+    >>> from sknarx.gap.unbalance import check_trial_runs, load_campaign
+    >>> campaign = load_campaign(load_rk4_unbalance().frame)
+    >>> [campaign.conditions[i] for i in check_trial_runs(campaign, ("A007", "A015"))]
+    ['A007', 'A015']
+    >>> check_trial_runs(campaign, ("A015", "A007"))
+    Traceback (most recent call last):
+    ...
+    ValueError: Trial run 'A015' has no known unbalance on disk 1: name a labelled ...
+    """
     unknown = [c for c in trial_runs if c not in campaign.conditions]
     if unknown:
         raise ValueError(f"The trial runs {unknown} are not conditions of the campaign; name "

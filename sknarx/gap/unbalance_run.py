@@ -47,6 +47,17 @@ class CampaignScoring:
     this (g mm); ``trial_runs``: one labelled condition per disk with a trial mass on that
     disk alone; ``thresholds_gmm``: the detection thresholds searched on the labelled
     conditions (default: six from 7/12 of ``loaded_gmm`` up to it).
+
+    Examples
+    --------
+    >>> from sknarx.gap.unbalance_run import CampaignScoring
+    >>> spec = {"loaded_gmm": 6.0, "phase_from_gmm": 24.0, "trial_runs": ["A007", "A015"]}
+    >>> CampaignScoring.from_config({"unbalance": spec}).thresholds_gmm
+    (3.5, 4.0, 4.5, 5.0, 5.5, 6.0)
+    >>> CampaignScoring.from_config({"unbalance": {"loaded_gmm": 6.0}})
+    Traceback (most recent call last):
+    ...
+    ValueError: The rotor file's [unbalance] section lacks phase_from_gmm, trial_runs (e.g. ...
     """
 
     loaded_gmm: float
