@@ -99,3 +99,34 @@ def test_the_cost_benchmark_reads_readings_as_the_blind_run_does():
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     assert "--reading" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_the_looseness_alone_benchmark_names_a_usage_error(capsys):
+    import bench_gap_looseness_alone as bench
+
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--seeds", "55058,x"])
+    assert exc.value.code == 2
+    assert "--seeds takes integers" in capsys.readouterr().err
+
+
+def test_the_looseness_alone_names_three_loose_joints_in_the_reading_and_none_as_given():
+    """results/bench_gap_looseness_alone.json (docs/gap_validation.md, *The looseness
+    alone in the second plant's reading*): the ceiling a search of readings has on the
+    second plant's visible loose joints of 51000-59000 -- the candidate's form names 3 of
+    14 in the reading tilt_share_O = 1 (each with its residual within 20 % of the
+    truth) and none on the rotor as given."""
+    import json
+
+    import bench_gap_looseness_alone as bench
+
+    report = json.loads((bench.RESULTS / "bench_gap_looseness_alone.json").read_text())
+    assert report["n_seeds"] == len(bench.SEEDS) == 14
+    assert report["named"] == {"as given": 0, "tilt_share_O = 1": 3}
+    logged = bench.logged(report["code"])
+    named = {s for (s, r), rec in logged.items()
+             if r == "tilt_share_O = 1" and rec["verdict"] == "looseness"}
+    assert named == {51058, 55058, 59010}
+    for s in named:
+        rec = logged[(s, "tilt_share_O = 1")]
+        assert abs(rec["params"]["residual"] / rec["truth"]["residual"] - 1) < 0.2, s
