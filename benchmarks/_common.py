@@ -14,6 +14,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
+# after the thread settings: it imports numpy
+from sknarx.io import write_text_atomic  # noqa: E402
+
 RESULTS = Path(__file__).resolve().parent / "results"
 #: how a plant's own run fails (ROSS's Newton iteration raises a bare Warning): the
 #: benchmarks skip or redraw such a trial instead of diagnosing a sweep that is not there
@@ -115,7 +118,8 @@ def write_json(name, payload):
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / f"{name}.json"
     payload = {"machine": machine(), **payload}
-    path.write_text(json.dumps(payload, indent=1, default=float))
+    # a report stopped mid-write would leave a truncated file its pinned tests read
+    write_text_atomic(path, json.dumps(payload, indent=1, default=float))
     print(f"\nwrote {path}")
     return path
 
