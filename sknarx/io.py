@@ -54,7 +54,15 @@ def write_atomic(path, write) -> Path:
 
 
 def _umask() -> int:
-    mask = os.umask(0)
+    """The process's umask, read where the system shows it: setting it to read it back
+    would, for an instant, let another thread create a file with no mask."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0)  # elsewhere: set and restore
     os.umask(mask)
     return mask
 
