@@ -153,6 +153,23 @@ def setting_overrides(items, fields, ap, flag, example,
     return out
 
 
+def read_log(*paths):
+    """Every record of the JSON-lines logs ``paths``, in order (a missing log holds none):
+    the benchmarks append each finished trial to one, so a stopped run resumes."""
+    for path in paths:
+        if Path(path).exists():
+            for line in Path(path).read_text().splitlines():
+                yield json.loads(line)
+
+
+def append_log(path, record):
+    """Append ``record`` to the JSON-lines log ``path`` as one line (its folder made)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as f:
+        f.write(json.dumps(record, default=float) + "\n")
+
+
 def rerun_trials(ap, items, families, log, run):
     """Yield the records of ``FAMILY:SEED`` ``items`` in turn, each from the JSON-lines
     ``log`` if it is there, else ``run(family, seed)``'s, appended to it first: a re-run
@@ -164,16 +181,11 @@ def rerun_trials(ap, items, families, log, run):
             ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(families)}; "
                      f"got {item!r}")
         keys.append((family, int(seed)))
-    done = {}
-    if log.exists():
-        for line in log.read_text().splitlines():
-            r = json.loads(line)
-            done[(r["family"], r["seed"])] = r
+    done = {(r["family"], r["seed"]): r for r in read_log(log)}
     for key in keys:
         if key not in done:
             done[key] = run(*key)
-            with log.open("a") as f:
-                f.write(json.dumps(done[key], default=float) + "\n")
+            append_log(log, done[key])
         yield done[key]
 
 
@@ -181,10 +193,8 @@ def logged_eval_trial(family, seed, commits=None):
     """The last logged (not skipped) blind evaluation trial ``family:seed``, from a run of
     one of ``commits`` (prefixes; any when None); None if there is none."""
     rec = None
-    for path in sorted(RESULTS.glob(f"gap_blind_eval_{family}*.jsonl")):
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            if (r["seed"] == seed and "skipped" not in r
-                    and (commits is None or r.get("commit", "").startswith(tuple(commits)))):
-                rec = r
+    for r in read_log(*sorted(RESULTS.glob(f"gap_blind_eval_{family}*.jsonl"))):
+        if (r["seed"] == seed and "skipped" not in r
+                and (commits is None or r.get("commit", "").startswith(tuple(commits)))):
+            rec = r
     return rec

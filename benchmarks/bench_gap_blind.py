@@ -56,7 +56,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from plants.families import (  # noqa: E402
     FAMILIES,
     LIB,
@@ -618,13 +618,11 @@ def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaus
     suffix = f".shard{k}of{n_shards}" if n_shards > 1 else ""
     log = RESULTS / f"gap_blind_{phase}_{family}{suffix}.jsonl"
     done, stale = {}, 0
-    for path in sorted(RESULTS.glob(f"gap_blind_{phase}_{family}*.jsonl")):
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            if r.get("code") == code:
-                done[r["seed"]] = r
-            else:
-                stale += 1
+    for r in read_log(*sorted(RESULTS.glob(f"gap_blind_{phase}_{family}*.jsonl"))):
+        if r.get("code") == code:
+            done[r["seed"]] = r
+        else:
+            stale += 1
     if stale:
         print(f"  {stale} logged trials from other code ignored", flush=True)
     recs = []
@@ -637,8 +635,7 @@ def run(trials, phase, family, settings, shard=(0, 1), report_only=False, exhaus
             continue
         r = run_trial(kind, seed, family, settings, exhaustive, readings, second_pass)
         r["commit"], r["code"] = commit, code
-        with log.open("a") as f:
-            f.write(json.dumps(r, default=float) + "\n")
+        append_log(log, r)
         if "skipped" in r:
             print(f"  {family} seed {seed} {kind}: skipped ({r['skipped']})", flush=True)
             continue

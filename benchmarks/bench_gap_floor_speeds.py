@@ -25,7 +25,6 @@ suite and two blind-benchmark processes.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -33,7 +32,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from bench_gap_blind import code_hash, lognormal_quantile  # noqa: E402
 from bench_gap_cost import SPEEDS_19  # noqa: E402
 from plants import families  # noqa: E402
@@ -66,14 +65,8 @@ def gap_before(family, seed, n_steps):
 
 
 def _logged(code):
-    if not LOG.exists():
-        return {}
-    out = {}
-    for line in LOG.read_text().splitlines():
-        r = json.loads(line)
-        if r.get("code") == code:
-            out[(r["family"], r["seed"], r["steps"])] = r
-    return out
+    return {(r["family"], r["seed"], r["steps"]): r for r in read_log(LOG)
+            if r.get("code") == code}
 
 
 def summarise(recs, frozen):
@@ -126,8 +119,7 @@ def main():
         except PLANT_FAILURES as exc:  # the plant diverged
             rec = {"family": key[0], "seed": key[1], "steps": key[2], "skipped": str(exc)}
         rec["code"] = code
-        with LOG.open("a") as fh:
-            fh.write(json.dumps(rec) + "\n")
+        append_log(LOG, rec)
         done[key] = rec
         print(f"  {key[0]} seed {key[1]} {key[2]} steps: "
               + (f"e0 {rec['e0']:.3f} per feature ({rec['seconds']:.0f} s)"

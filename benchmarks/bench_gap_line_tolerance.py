@@ -44,7 +44,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, table, write_json  # noqa: E402
 from plants.families import make_family_trial  # noqa: E402
 
 import sknarx.gap.diagnosis as diagnosis  # noqa: E402
@@ -120,8 +120,7 @@ def run(specs, without_effect=False):
                 rec["tolerance_1x"] = d["nominal_update"]["model_tolerance_1x"]
         rec["sec"] = time.perf_counter() - t
         print(json.dumps(rec), flush=True)
-        with LOG.open("a") as f:
-            f.write(json.dumps(rec) + "\n")
+        append_log(LOG, rec)
 
 
 def decompose(spec):

@@ -25,14 +25,13 @@ plant's reading*), not a blind evaluation; no threshold is set from it.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, table, write_json  # noqa: E402
+from _common import RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from bench_gap_blind import code_hash  # noqa: E402
 from plants.families import make_family_trial  # noqa: E402
 
@@ -63,13 +62,7 @@ def alone(seed, reading):
 
 
 def logged(code):
-    done = {}
-    if LOG.exists():
-        for line in LOG.read_text().splitlines():
-            r = json.loads(line)
-            if r.get("code") == code:
-                done[(r["seed"], r["reading"])] = r
-    return done
+    return {(r["seed"], r["reading"]): r for r in read_log(LOG) if r.get("code") == code}
 
 
 def main(argv=None):
@@ -93,8 +86,7 @@ def main(argv=None):
             if i % n != k or key in done:
                 continue
             rec = {**alone(*key), "code": code}
-            with LOG.open("a") as f:
-                f.write(json.dumps(rec, default=float) + "\n")
+            append_log(LOG, rec)
             done[key] = rec
             print(f"  {key[0]} {key[1]:18s} {rec['verdict']:12s} shrink "
                   f"{rec['shrink']:6.2f}, log shrink {rec['log_shrink']:6.2f} "

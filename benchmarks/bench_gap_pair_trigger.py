@@ -27,7 +27,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, table, write_json  # noqa: E402
+from _common import RESULTS, append_log, table, write_json  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     code_hash,
     run_trial,
@@ -123,8 +123,7 @@ def main(argv=None):
         if key in done:
             continue
         rec = {**run_trial(kind, seed, args.family, settings), "code": code}
-        with log.open("a") as f:
-            f.write(json.dumps(rec, default=float) + "\n")
+        append_log(log, rec)
     done = logged_trials()
     recs = [(done.get((args.family, json.dumps(k), s, code)), rule) for k, s, rule in todo]
     if any(r is None for r, _ in recs):

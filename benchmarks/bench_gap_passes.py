@@ -50,7 +50,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     detectable,
     hash_files,
@@ -164,13 +164,9 @@ def bow_limit(family, seeds, scales, settings):
 
 def logged(phase, family, code):
     """The logged comparisons of one phase and family under ``code``, by seed."""
-    done = {}
-    for path in sorted(RESULTS.glob(f"gap_passes_{phase}_{family}*.jsonl")):
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            if r.get("code") == code:
-                done[r["seed"]] = r
-    return done
+    return {r["seed"]: r
+            for r in read_log(*sorted(RESULTS.glob(f"gap_passes_{phase}_{family}*.jsonl")))
+            if r.get("code") == code}
 
 
 def run(trials, phase, family, code, shard=(0, 1), settings=None):
@@ -187,8 +183,7 @@ def run(trials, phase, family, code, shard=(0, 1), settings=None):
         if i % n != k:
             continue
         r = {**compared(kind, seed, family, settings), "code": code}
-        with log.open("a") as f:
-            f.write(json.dumps(r, default=float) + "\n")
+        append_log(log, r)
         done[seed] = r
         print(f"  {family} seed {seed} {str(r.get('kind', kind)):28s} "
               + (f"skipped ({r['skipped']})" if "skipped" in r else

@@ -19,14 +19,13 @@ It is analysis, not a blind evaluation, and no threshold is set from it.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from bench_gap_blind import code_hash, parse_readings  # noqa: E402
 from plants.families import FAMILIES, make_family_trial  # noqa: E402
 
@@ -102,11 +101,8 @@ def main():
                      f"got {item!r}")
         items.append((family, kind, int(seed)))
     code = code_hash()
-    done = {}
-    if LOG.exists():
-        for line in LOG.read_text().splitlines():
-            r = json.loads(line)
-            done[(r["family"], r["kind"], r["seed"], r["reading"], r["code"])] = r
+    done = {(r["family"], r["kind"], r["seed"], r["reading"], r["code"]): r
+            for r in read_log(LOG)}
     rows = []
     for family, kind, seed in items:
         key = (family, kind, seed, args.reading, code)
@@ -114,9 +110,7 @@ def main():
             print(f"{family}:{kind}:{seed} ...", flush=True)
             rec = {"family": family, "kind": kind, "seed": seed, "reading": args.reading,
                    "code": code, **run(family, kind, seed, readings)}
-            RESULTS.mkdir(exist_ok=True)
-            with LOG.open("a") as f:
-                f.write(json.dumps(rec, default=float) + "\n")
+            append_log(LOG, rec)
             done[key] = rec
         rows.append(done[key])
     table([[r["family"], r["kind"], r["seed"], r.get("verdict_without_readings", "-"),

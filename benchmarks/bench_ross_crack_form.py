@@ -19,14 +19,13 @@ of the code it ran on, and a re-run resumes from the rows of the same code).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import PLANT_FAILURES, RESULTS, table, write_json  # noqa: E402
+from _common import PLANT_FAILURES, RESULTS, append_log, read_log, table, write_json  # noqa: E402
 from bench_gap_blind import code_hash, git_commit  # noqa: E402
 from plants.families import feature_gap, make_family_trial  # noqa: E402
 
@@ -77,12 +76,9 @@ def main():
     unknown = set(modes) - set(MODES)
     if unknown:
         ap.error(f"unknown mode(s) {sorted(unknown)}; choose from {sorted(MODES)}")
-    code, done = code_hash(), {}
-    if LOG.exists():
-        for line in LOG.read_text().splitlines():
-            r = json.loads(line)
-            if r.get("code") == code:
-                done[(r["seed"], r["form"], r["mode"])] = r
+    code = code_hash()
+    done = {(r["seed"], r["form"], r["mode"]): r for r in read_log(LOG)
+            if r.get("code") == code}
     for mode in modes:
         for seed in seeds:
             for form in FORMS:
@@ -90,9 +86,7 @@ def main():
                     continue
                 r = {**run(seed, form, mode), "code": code, "commit": git_commit()}
                 done[(seed, form, mode)] = r
-                RESULTS.mkdir(exist_ok=True)
-                with LOG.open("a") as fh:
-                    fh.write(json.dumps(r, default=float) + "\n")
+                append_log(LOG, r)
                 print(f"seed {seed} {form:10s} {mode:8s} -> {r.get('verdict', r.get('skipped'))}",
                       flush=True)
     rows, out = [], []
