@@ -121,3 +121,34 @@ def test_one_gap_core_and_front_ends_that_write_nothing():
         assert not calls & {"write_text", "to_csv", "savefig", "mkdir"}, front
         assert "sknarx.gap.core" in imports(gap / front)
         assert not imports(gap / front) & {"sknarx.gap.report", "sknarx.gap.bode_report"}
+
+
+#: the calls that write a file
+WRITERS = {"write_text", "write_bytes", "to_csv", "to_parquet", "savefig"}
+
+
+def test_every_file_the_package_writes_is_written_whole_or_not_at_all():
+    """A write call appears only inside the callback ``lambda tmp: ...`` handed to
+    ``sknarx._atomic.write_atomic`` (which writes a temporary file and replaces the
+    target in one step), so a run stopped mid-write never leaves a truncated model,
+    report, sweep table or figure; ``open`` only reads."""
+    offenders = []
+    for path in PKG.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        in_callback = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Lambda) and [a.arg for a in node.args.args] == ["tmp"]:
+                in_callback.update(id(n) for n in ast.walk(node.body))
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Call) or id(node) in in_callback:
+                continue
+            f = node.func
+            if isinstance(f, ast.Attribute) and f.attr in WRITERS:
+                offenders.append(f"{path.name}:{node.lineno} .{f.attr}")
+            if isinstance(f, ast.Name) and f.id == "open":
+                modes = [a.value for a in node.args[1:2] if isinstance(a, ast.Constant)]
+                modes += [k.value.value for k in node.keywords
+                          if k.arg == "mode" and isinstance(k.value, ast.Constant)]
+                if any(set(m) & set("wax+") for m in modes):
+                    offenders.append(f"{path.name}:{node.lineno} open({modes[0]!r})")
+    assert not offenders, offenders

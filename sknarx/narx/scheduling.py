@@ -16,6 +16,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from .._atomic import write_text_atomic
 from .._json import json_safe
 from ._design import check_nan_rows, read_term_matrix
 from ._els import extended_least_squares
@@ -878,7 +879,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         check_is_fitted(self, "coef_poly_")
         text = json.dumps(json_safe(model_state(self)), indent=1)
         if path is not None:
-            Path(path).write_text(text)
+            write_text_atomic(path, text)
         return text
 
     @classmethod
