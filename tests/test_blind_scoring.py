@@ -913,3 +913,27 @@ def test_the_deeper_pair_search_logs_give_the_figures_of_the_record(package_runs
     assert [crack[t]["pairs in top two"] for t in (0.5, 0.1, 0.0)] == [0, 1, 1]
     ripple = at(["crack", "speed-fluctuation"], "speed-fluctuation", singles=False)
     assert [ripple[t]["pairs in top two"] for t in (0.5, 0.1, 0.0)] == [0, 0, 1]
+
+
+def test_fresh_pair_trials_take_every_pair_in_turn_and_score_what_the_benchmark_scores():
+    """``bench_gap_pair_trigger --fresh``: the family's library pairs in turn from the
+    first seed; counted are the pair trials the blind benchmark scores as pairs (run,
+    detectable, both members visible beside each other), nothing else."""
+    import bench_gap_pair_trigger as trig
+    from plants.families import PAIRS
+
+    todo = trig.fresh_trials("ross", 63000, 9)
+    assert [s for _, s in todo] == list(range(63000, 63009))
+    assert [k for k, _ in todo[:len(PAIRS)]] == PAIRS and todo[len(PAIRS)][0] == PAIRS[0]
+    ranking = [("runout", 0.9, 0.8, 0.2, {}), ("anisotropy", 0.5, 0.3, 0.4, {})]
+
+    def pair(seed, gaps, effect_gap=10.0):
+        rec = _record(["anisotropy", "runout"], {"anisotropy": {}, "runout": {}}, ranking,
+                      effect_gap=effect_gap)
+        return dict(rec, seed=seed, member_gap=gaps)
+
+    recs = [pair(1, {"anisotropy": 1.0, "runout": 5.0}),
+            pair(2, {"anisotropy": 0.1, "runout": 5.0}),  # hidden beside the runout
+            pair(3, {"anisotropy": 1.0, "runout": 5.0}, effect_gap=0.1),  # not detectable
+            {"kind": ["crack", "runout"], "seed": 4, "skipped": "Newton"}]
+    assert [r["seed"] for r in trig.scored_pairs(recs, S)] == [1]
