@@ -81,8 +81,10 @@ from sknarx.gap.settings import SEARCH_FIELDS  # noqa: E402
 #: pairs are fitted wherever the best single leaves more than this per feature, so a
 #: logged run can be decided again under any trigger from here up
 #: (``rescore_gap_blind.py``). It is the package's own ``pair_search_trigger``, so the
-#: rankings scored are those ``sknarx gap`` makes
-SEARCH_PAIR_TRIGGER = 0.2
+#: rankings scored are those ``sknarx gap`` makes; each report records it
+SEARCH_PAIR_TRIGGER = 0.1
+#: what the runs before the report recorded it searched with
+EARLIER_SEARCH_PAIR_TRIGGER = 0.2
 
 
 def search_settings():
@@ -821,6 +823,7 @@ def main():
                "out-of-lib unexpl.", "verdicts changed"])
     write_json("bench_gap_blind", {
         "thresholds": asdict(frozen), "thresholds_source": source,
+        "search_pair_trigger": SEARCH_PAIR_TRIGGER,
         "pilot": score(pilot, frozen) if pilot else None,
         "families": per_family,
         "targets": TARGETS,

@@ -52,7 +52,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, setting_overrides, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
-    SEARCH_PAIR_TRIGGER,
+    EARLIER_SEARCH_PAIR_TRIGGER,
     detectable,
     right,
     score,
@@ -267,8 +267,10 @@ def main(argv=None):
             ap.error(f"--what-if {name}: {value!r} is not a number (None for "
                      f"{', '.join(NULLABLE)}, True or False for {' and '.join(SWITCHES)}, "
                      "three comma-separated numbers for order_floors_z2)")
-    if changes.get("pair_trigger", SEARCH_PAIR_TRIGGER) < SEARCH_PAIR_TRIGGER:
-        ap.error(f"--what-if pair_trigger below {SEARCH_PAIR_TRIGGER} (the blind run's own "
+    searched = _report(args.report, ap).get("search_pair_trigger",
+                                            EARLIER_SEARCH_PAIR_TRIGGER)
+    if changes.get("pair_trigger", searched) < searched:
+        ap.error(f"--what-if pair_trigger below {searched} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
     other = replace(frozen, **changes)
     evals = load(args.families.split(","), args.commit)

@@ -316,6 +316,18 @@ def test_a_what_if_of_the_wrong_type_is_a_usage_error(what_if, capsys):
     assert "--what-if" in err and "Traceback" not in err
 
 
+
+def test_a_what_if_pair_trigger_below_the_runs_own_search_is_a_usage_error(capsys):
+    """A logged run holds pairs only where its search tried them: from the trigger its
+    report records, 0.2 for the runs before the report recorded it."""
+    import rescore_gap_blind as rescore
+
+    with pytest.raises(SystemExit) as exc:
+        rescore.main(["--report", "results/bench_gap_blind_59000_c1a3131.json",
+                      "--commit", "c1a3131", "--what-if", "pair_trigger=0.15"])
+    assert exc.value.code == 2
+    assert "below 0.2 (the blind run's own search trigger)" in capsys.readouterr().err
+
 def test_the_rates_interval_is_wilsons():
     """Known values: 0 of n has the upper bound z^2 / (n + z^2); 5 of 10 is symmetric
     about one half."""
@@ -937,3 +949,28 @@ def test_fresh_pair_trials_take_every_pair_in_turn_and_score_what_the_benchmark_
             pair(3, {"anisotropy": 1.0, "runout": 5.0}, effect_gap=0.1),  # not detectable
             {"kind": ["crack", "runout"], "seed": 4, "skipped": "Newton"}]
     assert [r["seed"] for r in trig.scored_pairs(recs, S)] == [1]
+
+
+def test_the_fresh_ross_pairs_rank_more_in_the_top_two_from_01_and_lose_none():
+    """docs/gap_validation.md, *The fresh ROSS pairs: what they score*: the committed
+    logs of ``bench_gap_pair_trigger --fresh 63000:36`` (code ``5abc44f06a75e081``),
+    decided by the 61000 run's thresholds: 33 scored pairs, 21 / 27 / 29 / 30 in the top
+    two from 0.5 / 0.2 / 0.1 / 0, no pair lost from 0.2 to 0.1, and 16 named at the
+    package's ``pair_trigger`` -- the figures the package's search trigger was set on."""
+    import bench_gap_pair_trigger as trig
+    from misses_gap_blind import top2_searched_from
+    from rescore_gap_blind import frozen_thresholds
+
+    rule = frozen_thresholds(trig.LATEST_RUN, argparse.ArgumentParser())
+    recs = [r for r in trig.logged_trials(trig.FRESH_LOGS).values()
+            if r["code"] == "5abc44f06a75e081" and r["family"] == "ross"]
+    assert sorted(r["seed"] for r in recs) == list(range(63000, 63036))
+    scored = trig.scored_pairs(recs, rule)
+    assert len(scored) == 33
+    got = {o["pair_trigger"]: o for o in trig.ladder([(r, rule) for r in scored])}
+    assert [got[t]["pairs in top two"] for t in (0.5, 0.2, 0.1, 0.0)] == [21, 27, 29, 30]
+    assert got[0.5]["pairs named"] == 16
+    lost = [r["seed"] for r in scored if set(r["kind"]) <= top2_searched_from(r, 0.2)
+            and not set(r["kind"]) <= top2_searched_from(r, 0.1)]
+    assert lost == []
+    assert DiagnosisSettings().pair_search_trigger == 0.1

@@ -878,7 +878,7 @@ def test_a_partner_that_only_changes_the_linear_rotor_is_model_error_not_an_effe
 
 def test_pairs_are_searched_below_the_trigger_that_names_them_and_said_so():
     """A weak second effect beside a dominant one (a mild anisotropy under a runout
-    leaving 0.3 per feature): pairs are searched from ``pair_search_trigger`` (0.2) and
+    leaving 0.3 per feature): pairs are searched from ``pair_search_trigger`` (0.1) and
     ranked, but named only where the single leaves more than ``pair_trigger`` (0.5);
     the verdict names the single and says which pair it did not name and why. The blind
     benchmark scored rankings searched this way."""
@@ -908,7 +908,7 @@ def test_pairs_are_searched_below_the_trigger_that_names_them_and_said_so():
     assert doc["verdict"] == "runout" and "pair_under_trigger" not in doc
     assert under_trigger_text(doc) == ""
     # a lead leaving less than the search trigger gets no partner
-    fits[("runout",)] = _given_fit(["runout"], 15.0, 12)
+    fits[("runout",)] = _given_fit(["runout"], 8.0, 12)
     _, ranked, doc = _search_given(fits, {})
     assert all(len(effect_names(r)) == 1 for r in ranked)
     # above pair_trigger the pair is named, and nothing is set aside
@@ -916,17 +916,17 @@ def test_pairs_are_searched_below_the_trigger_that_names_them_and_said_so():
     _, _, doc = _search_given(fits, {})
     assert doc["verdict"] == ["runout", "anisotropy"] and "pair_under_trigger" not in doc
     # a pair that is not searched cannot be named: the search starts at the lower one
-    assert pair_search_from(DiagnosisSettings()) == 0.2
-    assert pair_search_from(DiagnosisSettings(pair_trigger=0.1)) == 0.1
+    assert pair_search_from(DiagnosisSettings()) == 0.1
+    assert pair_search_from(DiagnosisSettings(pair_trigger=0.05)) == 0.05
     assert pair_search_from(ORDER_DOMAIN_SETTINGS) == 0.0
 
 
 def test_an_effect_left_with_model_error_alone_is_a_no_gap_verdict_with_it_stated():
     support = {"support-flexibility": {"k": 3e7, "mass": 12.0, "damping": 900.0}}
-    # 0.15 per feature: under the pair search's trigger, so no pairs
-    fits = {("anisotropy",): _given_fit(["anisotropy"], 15.0, 4),
+    # 0.08 per feature: under the pair search's trigger (0.1), so no pairs
+    fits = {("anisotropy",): _given_fit(["anisotropy"], 8.0, 4),
             ("crack",): _given_fit(["crack"], 1200.0, 3)}
-    forms = {("anisotropy",): [_given_fit([], 16.0, 3, support)]}
+    forms = {("anisotropy",): [_given_fit([], 8.5, 3, support)]}
     _, ranked, doc = _search_given(fits, forms)
     assert doc["verdict"] == "no-gap" and doc["model_error"] == support
     assert doc["shrink"] == 0.0 and ranked[0]["effect"] == []
