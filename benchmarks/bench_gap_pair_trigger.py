@@ -108,6 +108,21 @@ def logged_trials(logs=LOGS):
     return out
 
 
+def run_logged(todo, family, settings, code, log, done, with_member_gaps=False):
+    """Diagnose each ``(kind, seed)`` of ``todo`` not yet in ``done`` (from
+    :func:`logged_trials`) and append it to ``log``; with ``with_member_gaps``, each
+    pair member's visibility beside the other too (:func:`bench_gap_blind.member_gaps`)."""
+    for kind, seed in tqdm(todo, desc="trials", unit="trial", file=sys.stderr):
+        if (family, json.dumps(kind), seed, code) in done:
+            continue
+        rec = {**run_trial(kind, seed, family, settings), "code": code}
+        if with_member_gaps and "ranking" in rec:
+            rec["member_gap"] = member_gaps(kind, seed, family)
+        append_log(log, rec)
+        print(f"  {family} seed {seed} {kind if isinstance(kind, str) else ' + '.join(kind)}: "
+              f"{'skipped' if 'skipped' in rec else 'done'}", flush=True)
+
+
 def ladder(recs, triggers=TRIGGERS):
     """``recs``, ``(logged trial, its rule)`` pairs, decided at each pair trigger of
     ``triggers`` with the rule's other thresholds: per trigger, how many pair trials are
@@ -147,15 +162,7 @@ def run_fresh(args, ap, argv):
     done = logged_trials(FRESH_LOGS)
     log = RESULTS / f"gap_pair_trigger_fresh.shard{i}of{n}.jsonl"
     mine = [t for k, t in enumerate(todo) if k % n == i]
-    for kind, seed in tqdm(mine, desc="fresh pair trials", unit="trial", file=sys.stderr):
-        if (args.family, json.dumps(kind), seed, code) in done:
-            continue
-        rec = {**run_trial(kind, seed, args.family, settings), "code": code}
-        if "ranking" in rec:
-            rec["member_gap"] = member_gaps(kind, seed, args.family)
-        append_log(log, rec)
-        print(f"  {args.family} seed {seed} {' + '.join(kind)}: "
-              f"{'skipped' if 'skipped' in rec else 'done'}", flush=True)
+    run_logged(mine, args.family, settings, code, log, done, with_member_gaps=True)
     done = logged_trials(FRESH_LOGS)
     recs = [done.get((args.family, json.dumps(k), s, code)) for k, s in todo]
     if any(r is None for r in recs):
@@ -222,12 +229,7 @@ def main(argv=None):
     done = logged_trials()
     log = RESULTS / f"gap_pair_trigger.shard{i}of{n}.jsonl"
     mine = [t for k, t in enumerate(todo) if k % n == i]
-    for kind, seed, _ in tqdm(mine, desc="trials", unit="trial", file=sys.stderr):
-        key = (args.family, json.dumps(kind), seed, code)
-        if key in done:
-            continue
-        rec = {**run_trial(kind, seed, args.family, settings), "code": code}
-        append_log(log, rec)
+    run_logged([(k, s) for k, s, _ in mine], args.family, settings, code, log, done)
     done = logged_trials()
     recs = [(done.get((args.family, json.dumps(k), s, code)), rule) for k, s, rule in todo]
     if any(r is None for r, _ in recs):

@@ -83,7 +83,7 @@ class DiagnosisSettings:
     # before the verdict may name it. The verdicts do not depend on it; the rankings
     # do: decided before fresh pair trials were drawn, a search from 0.1 ranked more
     # pairs in the top two than one from 0.2 and lost none (docs/gap.md, *The pair
-    # search from 0.1*), at about 40 s more where the best single leaves 0.1-0.2
+    # search from 0.1*), at about 53 s more where the best single leaves 0.1-0.2
     pair_search_trigger: float = 0.1
     # ... and score (AIC: held-out excess + 2 per parameter) this much below it; None: the
     # gain alone decides
