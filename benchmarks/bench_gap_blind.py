@@ -92,6 +92,13 @@ def search_settings():
     return replace(DiagnosisSettings(), pair_trigger=SEARCH_PAIR_TRIGGER)
 
 
+def null_settings(base):
+    """The settings the effect-free null trials are diagnosed with: ``base`` with no
+    floor any sweep is over, so that each measures the gap before any effect (the
+    floor they set cannot be used to measure them)."""
+    return replace(base, no_gap_per_feature=np.inf, order_floors_z2=None)
+
+
 #: the library code a trial's outcome depends on (hashed: a change invalidates the logs)
 TRIAL_CODE = ("gap", "rotor")
 
@@ -724,9 +731,7 @@ def main():
     base = search_settings()
     print("null trials (noise floor, own family)", flush=True)
     null = run([(None, 2000 + i) for i in range(args.null)], "null", "own",
-               replace(base, no_gap_per_feature=np.inf, order_floors_z2=None), shard,
-               args.report_only,
-               exhaustive=False)
+               null_settings(base), shard, args.report_only, exhaustive=False)
     print("pilot trials (threshold fitting, own family)", flush=True)
     pilot = run(plan(args.pilot, 1000, "own"), "pilot", "own", base, shard, args.report_only)
     evals = {}

@@ -974,3 +974,13 @@ def test_the_fresh_ross_pairs_rank_more_in_the_top_two_from_01_and_lose_none():
             and not set(r["kind"]) <= top2_searched_from(r, 0.1)]
     assert lost == []
     assert DiagnosisSettings().pair_search_trigger == 0.1
+
+
+def test_the_blind_benchmarks_settings_are_valid_settings():
+    """Every phase of a blind run makes its settings before its first trial: the null
+    trials' (no floor any sweep is over) and the evaluation's. A range check that refused
+    one stopped every blind run at its start (found when the 65000 run was started)."""
+    base = blind.search_settings()
+    null = blind.null_settings(base)
+    assert null.no_gap_per_feature == float("inf") and null.order_floors_z2 is None
+    assert base.pair_trigger == blind.SEARCH_PAIR_TRIGGER

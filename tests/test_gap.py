@@ -1,6 +1,7 @@
 """Gap diagnosis: features, gap map, file checks, and a fast blind subset end to end."""
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -1860,7 +1861,9 @@ def test_a_better_setting_found_by_the_recheck_is_decided_again():
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"no_gap_per_feature": -0.1}, "no_gap_per_feature must be a finite number in [0, inf)"),
+    ({"no_gap_per_feature": -0.1}, "no_gap_per_feature must be a number in [0, inf]"),
+    ({"no_gap_per_feature": float("nan")}, "no_gap_per_feature must be a number in [0, inf]"),
+    ({"min_shrink": float("inf")}, "min_shrink must be a finite number in (-inf, 1]"),
     ({"min_shrink": float("nan")}, "min_shrink must be a finite number"),
     ({"pass_rtol": 1.0}, "pass_rtol must be a finite number in [0, 1)"),
     ({"pair_margin": -1.0}, "pair_margin must be a finite number in [0, inf) or None"),
@@ -1888,6 +1891,13 @@ def test_a_setting_out_of_its_range_is_named_when_the_settings_are_made(change, 
     "order_floors_z2": st.none() | st.tuples(*[st.floats(0.01, 10.0)] * 3)}))
 def test_every_setting_in_its_range_is_accepted(change):
     assert replace(DiagnosisSettings(), **change).n_probe == change["n_probe"]
+
+
+def test_an_infinite_no_gap_floor_is_a_setting():
+    """A floor no sweep is over (every sweep within it) is how the blind benchmark's
+    effect-free trials measure the gap before any effect; the check once refused it, and
+    every blind run failed at its first trial."""
+    assert DiagnosisSettings(no_gap_per_feature=math.inf).no_gap_per_feature == math.inf
 
 
 def test_every_setting_has_its_range_checked():

@@ -213,14 +213,16 @@ def _check_range(name, value, low, high, closed, optional):
     (``closed``: whether each end is allowed; ``optional``: None too)."""
     if value is None and optional:
         return
+    # an infinite end that the range closes is a value (a floor no sweep is over)
     ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and \
-        math.isfinite(value)
+        (math.isfinite(value) or (value == high == math.inf and closed[1]))
     if ok:
         ok = (value >= low if closed[0] else value > low) and \
             (value <= high if closed[1] else value < high)
     if not ok:
         span = f"{'[' if closed[0] else '('}{low:g}, {high:g}{']' if closed[1] else ')'}"
-        raise ValueError(f"DiagnosisSettings.{name} must be a finite number in {span}"
+        kind = "a number" if high == math.inf and closed[1] else "a finite number"
+        raise ValueError(f"DiagnosisSettings.{name} must be {kind} in {span}"
                          f"{' or None' if optional else ''}, got {value!r}.")
 
 
@@ -241,7 +243,9 @@ def _or_none(span):
 
 #: each numeric field's range
 _RANGES = {
-    "no_gap_per_feature": _AT_LEAST_0, "min_shrink": _AT_MOST_1,
+    # inf: every sweep is within the floor (the benchmarks' effect-free trials, which
+    # measure the gap before any effect to set the floor, use it)
+    "no_gap_per_feature": (0.0, _INF, (True, True), False), "min_shrink": _AT_MOST_1,
     "min_log_shrink": _AT_MOST_1, "pair_trigger": _AT_LEAST_0, "pair_gain": _SHARE,
     "pair_search_trigger": _AT_LEAST_0, "pair_margin": _or_none(_AT_LEAST_0),
     "pair_rival_shrink": _or_none(_AT_MOST_1), "linear_form_gain": _or_none(_SHARE),
