@@ -300,7 +300,8 @@ class NoiseReferencedShrink:
     so this rule's shrink against the oracle (whose shrink is the plain one) reads high:
     its rates are what it is scored on. Stated 2026-11-27 with the by-kind detection,
     before the 37000 run (docs/gap_validation.md, *The update-followed misses by kind
-    of feature*)."""
+    of feature*); the package's rule since 2026-12-05 (``noise_per_feature``), so on a
+    run of the package's code from then it changes nothing."""
 
     noise_per_feature: float
 
@@ -336,9 +337,10 @@ def orders_over(rec, s):
 
 
 def logged_ranking(rec):
-    """A logged trial's ranking with each entry's held-out gap after under the core's
-    key (the log keeps it as ``E``)."""
-    return [{**r, "heldout_gap_after": r["E"]} for r in rec["ranking"]]
+    """A logged trial's ranking with each entry's held-out gaps before and after under
+    the core's keys (the log keeps them as the trial's ``E0`` and the entry's ``E``)."""
+    return [{**r, "heldout_gap_before": rec.get("E0"), "heldout_gap_after": r["E"]}
+            for r in rec["ranking"]]
 
 
 def chosen(rec, s, rule=None):

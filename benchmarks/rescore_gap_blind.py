@@ -66,13 +66,15 @@ from sknarx.gap.core import effect_names, shrinks_alone  # noqa: E402
 
 #: the thresholds :func:`~sknarx.gap.core.decide` reads after the search; the other
 #: settings change what the search finds, which a log cannot replay
-DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "min_log_shrink",
+DECISION = ("no_gap_per_feature", "order_floors_z2", "min_shrink", "noise_per_feature",
+            "min_log_shrink",
             "breadth_waived_at_floor", "attribute_below_floor", "pair_trigger", "pair_gain",
             "pair_margin", "pair_rival_shrink", "linear_form_gain", "pass_floor_sigmas")
 #: the decision settings that are switches (True or False)
 SWITCHES = ("breadth_waived_at_floor", "attribute_below_floor")
 #: the decision settings None switches off
-NULLABLE = ("order_floors_z2", "pair_margin", "pair_rival_shrink", "linear_form_gain")
+NULLABLE = ("order_floors_z2", "pair_margin", "pair_rival_shrink", "linear_form_gain",
+            "noise_per_feature")
 #: each rate's denominator in :func:`bench_gap_blind.score`
 COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           "pairs_verdict": "n_detectable_pairs", "false_alarm": "n_effect_free",
@@ -156,7 +158,9 @@ def frozen_thresholds(path, ap):
     # a report written before the breadth waiver existed was decided without it, one
     # written before the per-order floors without them, and one written before the
     # rival-pair test without it; likewise the linear-form gain and the attribution
-    # under the floor (each off until it was made the default)
+    # under the floor (each off until it was made the default), and the shrink measured
+    # against the noise (the plain shrink until 2026-12-05)
+    thresholds.setdefault("noise_per_feature", None)
     thresholds.setdefault("breadth_waived_at_floor", False)
     thresholds.setdefault("order_floors_z2", None)
     thresholds.setdefault("pair_rival_shrink", None)

@@ -16,7 +16,9 @@ import bench_gap_blind as blind  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
-S = replace(DiagnosisSettings(), no_gap_per_feature=0.33)
+# the package's settings with the plain shrink, which these synthetic records were written
+# for (the noise-referenced shrink has tests of its own)
+S = replace(DiagnosisSettings(), no_gap_per_feature=0.33, noise_per_feature=None)
 
 
 def _record(kind, truth_effects, ranking, e0=10.0, effect_gap=10.0, n=100):
@@ -203,6 +205,8 @@ def test_a_logged_sweep_is_decided_with_its_orders_tested_on_their_own():
     assert blind.verdict(crack, replace(s, order_floors_z2=None))[0] == "no-gap"
     referenced = blind.NoiseReferencedShrink(0.112)
     assert blind.verdict(crack, s, referenced)[0] == "crack"
+    # the package's rule since 2026-12-05 is that rule
+    assert blind.verdict(crack, replace(s, noise_per_feature=0.112))[0] == "crack"
     # an effect-free sweep under every floor stays no-gap under both
     assert blind.orders_over(quiet, s) == {}
     for rule in (None, referenced):
@@ -414,7 +418,7 @@ def test_the_45000_run_scored_the_package_before_the_rival_test_and_its_logs_rep
     # the attribution under the floor the default since the 51000 run
     assert ran.attribute_below_floor is False and package.attribute_below_floor is True
     _assert_decided_as(ran, package, but={"pair_rival_shrink", "linear_form_gain",
-                                          "attribute_below_floor"})
+                                          "attribute_below_floor", "noise_per_feature"})
     tried = replace(ran, **TRIED_PAIR)
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
     counts = {fam: (_right_in_library(recs, ran), _right_in_library(recs, tried))
@@ -627,7 +631,7 @@ def test_the_51000_run_decided_by_the_package_rule_names_one_more_right():
     ran, evals = _logged_run("results/bench_gap_blind_51000_d2868af.json", "9fe186a,d2868af")
     package = DiagnosisSettings()
     assert ran.attribute_below_floor is False and package.attribute_below_floor is True
-    _assert_decided_as(ran, package, but={"attribute_below_floor"})
+    _assert_decided_as(ran, package, but={"attribute_below_floor", "noise_per_feature"})
     now = replace(ran, attribute_below_floor=True)
     assert _changed_verdicts(evals, ran, now) == {("ross", 51012, '"anisotropy"')}
     before = {fam: _right_in_library(recs, ran) for fam, recs in evals.items()}
@@ -677,7 +681,9 @@ def test_the_57000_run_is_the_package_rule_and_its_logs_give_its_report():
     the logs' own: ROSS's cracks 57008 (with a partner) and 57053 (``unexplained``), the
     second plant's loose joints 57010 and 57042 ``unexplained``."""
     ran, evals = _logged_run("results/bench_gap_blind_57000_f917659.json", "f917659")
-    _assert_decided_as(ran, DiagnosisSettings(), but=())
+    # the package's defaults of its day: the shrink plain until 2026-12-05
+    assert ran.noise_per_feature is None
+    _assert_decided_as(ran, DiagnosisSettings(), but=("noise_per_feature",))
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 65, "second": 68}
     verdicts = {(fam, r["seed"]): blind.verdict(r, ran)[0]
                 for fam, recs in evals.items() for r in recs}
@@ -695,7 +701,9 @@ def test_the_59000_run_is_the_package_rule_and_its_logs_give_its_report():
     misalignment pairs 59017 and 59047 and clearance 59025 ``unexplained``, every loose
     joint of the second plant ``unexplained``."""
     ran, evals = _logged_run("results/bench_gap_blind_59000_c1a3131.json", "c1a3131")
-    _assert_decided_as(ran, DiagnosisSettings(), but=())
+    # the package's defaults of its day: the shrink plain until 2026-12-05
+    assert ran.noise_per_feature is None
+    _assert_decided_as(ran, DiagnosisSettings(), but=("noise_per_feature",))
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 64, "second": 68}
     verdicts = {(fam, r["seed"]): blind.verdict(r, ran)[0]
                 for fam, recs in evals.items() for r in recs}
@@ -716,7 +724,9 @@ def test_the_61000_run_in_two_passes_names_every_bow_unexplained_and_moves_nothi
     import rescore_gap_blind as rescore
 
     ran, evals = _logged_run("results/bench_gap_blind_61000_c8e46b2.json", "3664de5")
-    _assert_decided_as(ran, DiagnosisSettings(), but=())
+    # the package's defaults of its day: the shrink plain until 2026-12-05
+    assert ran.noise_per_feature is None
+    _assert_decided_as(ran, DiagnosisSettings(), but=("noise_per_feature",))
     assert {fam: len(recs) for fam, recs in evals.items()} == {"ross": 65, "second": 68}
     for recs in evals.values():
         for r in recs:
@@ -984,3 +994,30 @@ def test_the_blind_benchmarks_settings_are_valid_settings():
     null = blind.null_settings(base)
     assert null.no_gap_per_feature == float("inf") and null.order_floors_z2 is None
     assert base.pair_trigger == blind.SEARCH_PAIR_TRIGGER
+
+
+def test_the_noise_referenced_shrink_on_the_package_rules_runs_moves_top1_only():
+    """The decision of 2026-12-05 (docs/gap_validation.md, *The noise-referenced shrink
+    made the package's rule*): on the logged runs 51000-61000 with two passes, the
+    package's ``noise_per_feature`` names 12 more trials, 11 of them right (the second
+    plant's loose joint 59058 a crack), and moves no false alarm, pair or two-pass
+    out-of-library verdict; on the first pass alone it costs out-of-library the bows."""
+    import noise_shrink_gap_blind as ns
+
+    decided = ns.with_coast_downs(ns.decided_runs(ns.PACKAGE_RUNS))
+    noise = {"noise_per_feature": DiagnosisSettings().noise_per_feature}
+    plain = ns.pooled(decided, {"noise_per_feature": None})
+    referenced = ns.pooled(decided, noise)
+    assert plain["ross"]["top1"] == [141, 164] and referenced["ross"]["top1"] == [147, 164]
+    assert plain["second"]["top1"] == [164, 190]
+    assert referenced["second"]["top1"] == [169, 190]
+    for fam in ("ross", "second"):
+        for rate in ("false_alarm", "pairs_in_top2", "unexplained_out_of_library"):
+            assert plain[fam][rate] == referenced[fam][rate], (fam, rate)
+    moved = ns.changed(decided, noise)
+    assert len(moved) == 12
+    assert [(c["family"], c["seed"]) for c in moved if not c["right_after"]] == [
+        ("second", 59058)]
+    one = ns.pooled(decided, noise, one_pass=True)
+    assert one["ross"]["unexplained_out_of_library"] == [55, 83]
+    assert one["second"]["unexplained_out_of_library"] == [55, 77]

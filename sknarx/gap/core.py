@@ -40,7 +40,7 @@ __all__ = ["CandidateFit", "FrontEnd", "alternating_split", "bootstrap_shrink", 
            "order_mean_z2", "orders_over_floor",
            "pair_search_from", "pair_under_trigger", "preferred", "public_ranking", "rank",
            "recheck_choice", "regions_after",
-           "run_parallel", "search", "setting_support", "shortfalls", "shrink",
+           "judged_shrink", "run_parallel", "search", "setting_support", "shortfalls", "shrink",
            "table_evidence", "with_passes"]
 
 logger = logging.getLogger(__name__)
@@ -233,7 +233,8 @@ def preferred(ranking: list, settings, n_features: int):
         margin = settings.pair_margin
         if (pb["heldout_gap_after"] <= (1.0 - settings.pair_gain) * left
                 and (margin is None or best["score"] - pb["score"] >= margin)
-                and not rivals(pb, singles, settings.pair_rival_shrink)):
+                and not rivals(pb, singles, settings.pair_rival_shrink, settings,
+                               n_features)):
             return pb
     return best
 
@@ -274,7 +275,7 @@ def rival_pair_set_aside(ranking: list, settings, n_features: int) -> dict | Non
     if (plain is None or len(effect_names(plain)) != 2
             or preferred(ranking, settings, n_features) is plain):
         return None
-    alone = shrinks_alone(ranking)
+    alone = shrinks_alone(ranking, settings, n_features)
     return {"effect": plain["effect"], "shrink": plain["shrink"],
             "heldout_gap_after": plain["heldout_gap_after"],
             "members_alone": {name: alone[name] for name in effect_names(plain)},
@@ -301,28 +302,48 @@ def pair_under_trigger(ranking: list, settings, n_features: int) -> dict | None:
             "pair_trigger": settings.pair_trigger}
 
 
-def shrinks_alone(ranking: list) -> dict[str, float]:
+def shrinks_alone(ranking: list, settings=None, n_features: int = 1) -> dict[str, float]:
     """The share of the held-out gap each effect fitted alone removes (its single entry
-    in ``ranking``), by name. An effect fitted alone more than once (with rotor
-    readings: on the rotor as given and in a reading) counts its best fit: what it can
-    remove alone."""
+    in ``ranking``), by name: as the verdict judges it (:func:`judged_shrink`) with
+    ``settings``, the plain shrink without. An effect fitted alone more than once (with
+    rotor readings: on the rotor as given and in a reading) counts its best fit: what it
+    can remove alone."""
     alone: dict[str, float] = {}
     for r in ranking:
         names = effect_names(r)
         if len(names) == 1:
-            alone[names[0]] = max(alone.get(names[0], -np.inf), r["shrink"])
+            share = r["shrink"] if settings is None else judged_shrink(r, settings, n_features)
+            alone[names[0]] = max(alone.get(names[0], -np.inf), share)
     return alone
 
 
-def rivals(pair: dict, singles: list, share: float | None) -> bool:
+def rivals(pair: dict, singles: list, share: float | None, settings=None,
+           n_features: int = 1) -> bool:
     """Whether each member of ``pair``, fitted alone (its entry among ``singles``),
-    removes at least ``share`` of the held-out gap: two rival readings of one signature,
-    not two effects (see ``DiagnosisSettings.pair_rival_shrink``). A member not fitted
-    alone is no rival; ``share`` None: never."""
+    removes at least ``share`` of the held-out gap (as :func:`shrinks_alone` measures it
+    with ``settings``): two rival readings of one signature, not two effects (see
+    ``DiagnosisSettings.pair_rival_shrink``). A member not fitted alone is no rival;
+    ``share`` None: never."""
     if share is None:
         return False
-    alone = shrinks_alone(singles)
+    alone = shrinks_alone(singles, settings, n_features)
     return all(alone.get(name, -np.inf) >= share for name in effect_names(pair))
+
+
+def judged_shrink(entry: dict, settings, n_features: int) -> float:
+    """The share of the held-out gap a ranking ``entry`` removes, as the verdict judges
+    it: of the excess above the effect-free noise, ``(E0 - E) / (E0 - n m0)`` with ``m0``
+    ``settings.noise_per_feature`` and ``n`` the held-out features. No candidate removes
+    the noise, and near the no-gap floor it is a third of ``E0``, so the plain share
+    ``(E0 - E) / E0`` would ask a mild effect to remove some of it too. The plain share
+    where ``m0`` is None, the gap is not above the noise, or the entry does not carry its
+    gap before (``heldout_gap_before``)."""
+    m0 = settings.noise_per_feature
+    E0 = entry.get("heldout_gap_before")
+    above = E0 - m0 * n_features if m0 is not None and E0 is not None else 0.0
+    if above <= 0:
+        return entry["shrink"]
+    return (E0 - entry["heldout_gap_after"]) / above
 
 
 def order_mean_z2(cmp: pd.DataFrame) -> dict[str, dict]:
@@ -364,17 +385,17 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
     separate from the search so thresholds can be fixed on pilot trials and then
     applied unchanged to fresh ones.
 
-    A candidate explains the gap when it removes ``min_shrink`` of the held-out
-    excess *and* ``min_log_shrink`` of its logarithm: the excess is dominated by the
-    few largest features, and an effect that matches them while breaking many
-    others (a bearing rattling broadband to mimic an electrical line, say) must
-    not pass. The breadth check is waived (``breadth_waived_at_floor``) for a
-    candidate that leaves no more than ``no_gap_per_feature``: the test that calls
-    a sweep effect-free before any candidate then finds nothing left, whatever it broke
-    or left untouched on the way -- on a rotor its model does not describe exactly,
-    the model-form residual spread thinly over many features is what holds the
-    logarithm's share down, and no effect removes that. Which candidate is judged:
-    :func:`preferred`.
+    A candidate explains the gap when it removes ``min_shrink`` of the held-out excess
+    above the effect-free noise (:func:`judged_shrink`) *and* ``min_log_shrink`` of its
+    logarithm: the excess is dominated by the few largest features, and an effect that
+    matches them while breaking many others (a bearing rattling broadband to mimic an
+    electrical line, say) must not pass. The breadth check is waived
+    (``breadth_waived_at_floor``) for a candidate that leaves no more than
+    ``no_gap_per_feature``: the test that calls a sweep effect-free before any candidate
+    then finds nothing left, whatever it broke or left untouched on the way -- on a
+    rotor its model does not describe exactly, the model-form residual spread thinly
+    over many features is what holds the logarithm's share down, and no effect removes
+    that. Which candidate is judged: :func:`preferred`.
 
     ``orders_over`` (:func:`orders_over_floor`) names the orders whose held-out features
     exceed their own floor: a sweep under ``no_gap_per_feature`` with any is decided as
@@ -398,7 +419,8 @@ def decide(e0: float, ranking: list, settings, n_features: int, orders_over=()):
 
 def shortfalls(entry: dict, settings, n_features: int, under: bool = False) -> list[str]:
     """The tests of :func:`decide` that the judged candidate ``entry`` fails:
-    ``'shrink'`` (it removes less than ``min_shrink`` of the held-out excess) and
+    ``'shrink'`` (it removes less than ``min_shrink`` of the held-out excess above the
+    effect-free noise, :func:`judged_shrink`) and
     ``'breadth'`` (less than ``min_log_shrink`` of its logarithm, the waiver at the
     floor not applying); ``under``: the sweep was within the no-gap floor. Empty: the
     candidate is named."""
@@ -407,7 +429,7 @@ def shortfalls(entry: dict, settings, n_features: int, under: bool = False) -> l
     waived = (settings.breadth_waived_at_floor and not under
               and left <= settings.no_gap_per_feature)
     failed = []
-    if entry["shrink"] < settings.min_shrink:
+    if judged_shrink(entry, settings, n_features) < settings.min_shrink:
         failed.append("shrink")
     if entry["log_shrink"] < settings.min_log_shrink and not waived:
         failed.append("breadth")
@@ -641,6 +663,7 @@ def conclude(choice, ranking: list, cmp0: pd.DataFrame, where: list, settings,
         # so beside the verdict, not only in the ranking
         extra["setting_decided"] = choice["setting_decided"]
     return {"verdict": choice["effect"], "shrink": choice["shrink"],
+            "shrink_above_noise": judged_shrink(choice, settings, n_features),
             "shrink_band": bootstrap_shrink(cmp0, cmp, settings.n_bootstrap, settings.seed),
             "gap_after": gap_after, "regions_after": regions_after(where, cmp, cmp0),
             **extra}
@@ -655,6 +678,7 @@ def closest(ranking: list, settings, n_features: int) -> dict | None:
     if judged is None:
         return None
     return {"effect": judged["effect"], "shrink": float(judged["shrink"]),
+            "shrink_above_noise": float(judged_shrink(judged, settings, n_features)),
             "log_shrink": float(judged["log_shrink"]),
             "heldout_gap_after": float(judged["heldout_gap_after"]),
             "short_of": shortfalls(judged, settings, n_features),
@@ -692,6 +716,10 @@ def with_passes(result, comparison):
     return result
 
 
-def public_ranking(ranking: list) -> list[dict]:
-    """The ranking as it goes into the document (the core's own keys dropped)."""
-    return [{k: v for k, v in r.items() if not k.startswith("_")} for r in ranking]
+def public_ranking(ranking: list, settings=None, n_features: int = 1) -> list[dict]:
+    """The ranking as it goes into the document (the core's own keys dropped); with
+    ``settings``, each entry with the share the verdict judges it by
+    (``shrink_above_noise``, :func:`judged_shrink`)."""
+    return [{**{k: v for k, v in r.items() if not k.startswith("_")},
+             **({"shrink_above_noise": judged_shrink(r, settings, n_features)}
+                if settings is not None else {})} for r in ranking]

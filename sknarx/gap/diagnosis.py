@@ -685,7 +685,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
             # the verdict's rotor is the reading it was fitted in, updated
             doc["rotor_reading"] = {"label": reading, "changes": readings[reading]}
             result.base = fronts[reading].model.base
-    doc["ranking"] = public_ranking(ranked)
+    doc["ranking"] = public_ranking(ranked, settings, n_features)
     return result
 
 

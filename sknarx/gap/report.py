@@ -228,10 +228,16 @@ def closest_text(doc) -> str:
         return ""
     lead = (f" The closest candidate, {_label(near['effect'])}, removes "
             f"{100 * near['shrink']:.0f} % of the held-out gap")
+    above = near.get("shrink_above_noise", near["shrink"])
+    if abs(above - near["shrink"]) >= 0.005:
+        # the verdict judges the share of the gap above the effect-free noise (its
+        # median: a sweep whose own noise is under it can have more than all removed)
+        lead += (" (more than all of what is above the effect-free noise)" if above > 1
+                 else f" ({100 * above:.0f} % of what is above the effect-free noise)")
     need, log = 100 * near["min_shrink"], 100 * near["log_shrink"]
     need_log = 100 * near["min_log_shrink"]
     if near["short_of"] == ["shrink"]:
-        return f"{lead}, where a named effect needs {need:.0f} %."
+        return f"{lead}, where a named effect needs {need:.0f} % of that."
     if near["short_of"] == ["breadth"]:
         return (f"{lead} but only {log:.0f} % of its logarithm, where a named effect needs "
                 f"{need_log:.0f} %: it matches the largest features, not the many others.")
@@ -351,8 +357,11 @@ def _under_floor_text(doc) -> str:
     if (before > float(settings["no_gap_per_feature"])
             or any(v.get("over_floor") for v in _by_order(doc).values())):
         return ""
+    noise = settings.get("noise_per_feature")
+    left = ("what is left" if noise is None else
+            f"what is left above the effect-free noise ({float(noise):.3g} per feature)")
     return (" Under the floor, it is named because it removes at least "
-            f"{100 * float(settings['min_shrink']):.0f} % of what is left and "
+            f"{100 * float(settings['min_shrink']):.0f} % of {left} and "
             f"{100 * float(settings['min_log_shrink']):.0f} % of its logarithm "
             "(attribute_below_floor).")
 

@@ -51,6 +51,15 @@ class DiagnosisSettings:
     # (docs/gap.md, *Where the frozen settings come from*)
     no_gap_per_feature: float = 0.340  # mean held-out excess per feature below which: no-gap
     min_shrink: float = 0.6  # a verdict must remove at least this share of the gap
+    # ... of the gap above the effect-free noise: the median held-out excess per feature
+    # of effect-free sweeps (the own family's 20 null trials, whose 99 % quantile is
+    # no_gap_per_feature), which no candidate can remove -- near the floor it is a third
+    # of the gap, and the plain share asked a mild effect to remove part of it too. A
+    # candidate's share for the verdict is (E0 - E) / (E0 - n * noise_per_feature), the
+    # plain (E0 - E) / E0 where the gap is not above the noise or with None
+    # (sknarx.gap.core.judged_shrink; docs/gap_validation.md, *The noise-referenced
+    # shrink made the package's rule*)
+    noise_per_feature: float | None = 0.112
     min_log_shrink: float = 0.3  # ... and this share of sum(log(1 + excess))
     # ... unless it leaves no more than no_gap_per_feature: what is left then cannot be
     # told from an effect-free sweep, so the breadth check has nothing to guard
@@ -246,6 +255,7 @@ _RANGES = {
     # inf: every sweep is within the floor (the benchmarks' effect-free trials, which
     # measure the gap before any effect to set the floor, use it)
     "no_gap_per_feature": (0.0, _INF, (True, True), False), "min_shrink": _AT_MOST_1,
+    "noise_per_feature": _or_none(_AT_LEAST_0),
     "min_log_shrink": _AT_MOST_1, "pair_trigger": _AT_LEAST_0, "pair_gain": _SHARE,
     "pair_search_trigger": _AT_LEAST_0, "pair_margin": _or_none(_AT_LEAST_0),
     "pair_rival_shrink": _or_none(_AT_MOST_1), "linear_form_gain": _or_none(_SHARE),
@@ -274,10 +284,11 @@ _FLAGS = ("breadth_waived_at_floor", "attribute_below_floor", "update_nominal",
 #: trials fit these; they are stated, not tuned: a verdict removes half the held-out gap
 #: and does not widen it (its log-excess does not grow); the pair is always tried and
 #: replaces its better member when its AIC is 10 lower (strong evidence on the
-#: chi-square scale); no noise floor is claimed (a record whose held-out bins all agree
-#: within their scatter is ``no-gap``), and with the 1x alone there are no orders to test
-#: on their own; 300 bootstrap draws.
+#: chi-square scale); no noise floor or noise median is claimed (a record whose held-out
+#: bins all agree within their scatter is ``no-gap``), and with the 1x alone there are no
+#: orders to test on their own; 300 bootstrap draws.
 ORDER_DOMAIN_SETTINGS = DiagnosisSettings(
-    no_gap_per_feature=0.0, order_floors_z2=None, min_shrink=0.5, min_log_shrink=0.0,
+    no_gap_per_feature=0.0, order_floors_z2=None, min_shrink=0.5, noise_per_feature=None,
+    min_log_shrink=0.0,
     pair_trigger=0.0, pair_gain=0.0, pair_margin=10.0, pair_rival_shrink=None,
     n_bootstrap=300, seed=0)
