@@ -437,4 +437,6 @@ def test_sknarx_gap_with_a_second_pass_file_end_to_end(tmp_path):
     assert res.stdout.startswith("verdict: unexplained")
     assert "The two passes of the sweep differ" in res.stdout
     doc = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
-    assert doc["passes"]["changed"] and doc["passes"]["one_pass"]["verdict"] == "no-gap"
+    # on one pass the relaxing bow is read as a runout (with the plain shrink it was
+    # no-gap; the shrink above the noise names it, the one-pass cost the record states)
+    assert doc["passes"]["changed"] and doc["passes"]["one_pass"]["verdict"] == "runout"
