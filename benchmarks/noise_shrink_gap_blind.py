@@ -33,15 +33,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
-from bench_gap_blind import right, score, truth_label, verdict  # noqa: E402
+from bench_gap_blind import right, truth_label, verdict  # noqa: E402
 from frontier_gap_blind import (  # noqa: E402
     PASSES_CODE,
     RUNS,
     TWO_PASS_RUNS,
     decided_runs,
+    pooled,
     with_coast_downs,
 )
-from rescore_gap_blind import first_pass_only, intervals  # noqa: E402
+from rescore_gap_blind import first_pass_only  # noqa: E402
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
@@ -53,19 +54,10 @@ RATES = {"top1": "top-1", "pairs_in_top2": "pairs in top two", "false_alarm": "f
          "unexplained_out_of_library": "out-of-library", "names_right": "names right"}
 
 
-def pooled(decided, change, one_pass=False):
-    """``{family: {rate: [k, n]}}`` over ``decided``, each run's rule changed by
-    ``change``; ``one_pass``: every trial decided from its first pass alone."""
-    out = {}
-    for rule, evals in decided:
-        rule = replace(rule, **change)
-        for fam, recs in evals.items():
-            recs = [first_pass_only(r) for r in recs] if one_pass else recs
-            for key, k, n, *_ in intervals(score(recs, rule)):
-                got = out.setdefault(fam, {}).setdefault(key, [0, 0])
-                got[0] += k
-                got[1] += n
-    return out
+def first_passes(decided):
+    """``decided`` with every trial's pass comparison left out: the first pass alone."""
+    return [(rule, {fam: [first_pass_only(r) for r in recs] for fam, recs in evals.items()})
+            for rule, evals in decided]
 
 
 def changed(decided, change):
@@ -91,8 +83,8 @@ def main(argv=None):
     print(f"loading the logs of {len(PACKAGE_RUNS)} runs", file=sys.stderr)
     decided = with_coast_downs(decided_runs(PACKAGE_RUNS))
     plain, referenced = {"noise_per_feature": None}, {"noise_per_feature": noise}
-    result = {f"{passes}_{name}": pooled(decided, change, passes == "one_pass")
-              for passes in ("two_passes", "one_pass")
+    sides = {"two_passes": decided, "one_pass": first_passes(decided)}
+    result = {f"{passes}_{name}": pooled(side, change) for passes, side in sides.items()
               for name, change in (("plain", plain), ("referenced", referenced))}
 
     def cell(fam, key, rate):

@@ -1018,6 +1018,6 @@ def test_the_noise_referenced_shrink_on_the_package_rules_runs_moves_top1_only()
     assert len(moved) == 12
     assert [(c["family"], c["seed"]) for c in moved if not c["right_after"]] == [
         ("second", 59058)]
-    one = ns.pooled(decided, noise, one_pass=True)
+    one = ns.pooled(ns.first_passes(decided), noise)
     assert one["ross"]["unexplained_out_of_library"] == [55, 83]
     assert one["second"]["unexplained_out_of_library"] == [55, 77]
