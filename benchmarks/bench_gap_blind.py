@@ -296,12 +296,14 @@ class NoiseReferencedShrink:
     sweep carries, ``(E0 - E) / (E0 - n m0)`` with ``m0`` the effect-free trials' median
     excess per feature (``noise_per_feature``). No candidate removes the noise, and on
     a sweep sent to the candidates by one order alone
-    (:func:`sknarx.gap.core.orders_over_floor`), under the floor, it is a third of E0;
-    so this rule's shrink against the oracle (whose shrink is the plain one) reads high:
-    its rates are what it is scored on. Stated 2026-11-27 with the by-kind detection,
-    before the 37000 run (docs/gap_validation.md, *The update-followed misses by kind
-    of feature*); the package's rule since 2026-12-05 (``noise_per_feature``), so on a
-    run of the package's code from then it changes nothing."""
+    (:func:`sknarx.gap.core.orders_over_floor`), under the floor, it is a third of E0.
+    Decided by the package's own ``judged_shrink`` at this noise (until 2026-12-05 the
+    benchmark rewrote each entry's shrink instead, which also reported that share as
+    the verdict's shrink against the oracle, whose shrink is the plain one). Stated
+    2026-11-27 with the by-kind detection, before the 37000 run (docs/gap_validation.md,
+    *The update-followed misses by kind of feature*); the package's rule since
+    2026-12-05 (``noise_per_feature``), so on a run of the package's code from then it
+    changes nothing."""
 
     noise_per_feature: float
 
@@ -346,13 +348,11 @@ def logged_ranking(rec):
 def chosen(rec, s, rule=None):
     """The frozen rule's choice on a logged trial: ``'no-gap'``, None (unexplained) or
     the chosen ranking entry; with ``rule`` (:class:`NoiseReferencedShrink`), that
-    rule's."""
-    ranking = logged_ranking(rec)
+    rule's: the package's own shrink above the noise (``noise_per_feature``) at the
+    rule's noise."""
     if rule is not None:
-        base = rec["E0"] - rule.noise_per_feature * rec["n_features"]
-        ranking = [{**r, "shrink": (rec["E0"] - r["E"]) / base if base > 0
-                    else r["shrink"]} for r in ranking]
-    return decide(rec["e0"], ranking, s, rec["n_features"], orders_over(rec, s))
+        s = replace(s, noise_per_feature=rule.noise_per_feature)
+    return decide(rec["e0"], logged_ranking(rec), s, rec["n_features"], orders_over(rec, s))
 
 
 def passes_differ(rec, s):

@@ -35,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
 from bench_gap_blind import right, truth_label, verdict  # noqa: E402
 from frontier_gap_blind import (  # noqa: E402
+    FAMILIES,
     PASSES_CODE,
     RUNS,
     TWO_PASS_RUNS,
@@ -48,7 +49,6 @@ from sknarx.gap import DiagnosisSettings  # noqa: E402
 
 #: the package rule's complete runs: frontier_gap_blind's and the one measured in two passes
 PACKAGE_RUNS = RUNS + TWO_PASS_RUNS
-FAMILIES = ("ross", "second")
 #: the rates printed, with their labels
 RATES = {"top1": "top-1", "pairs_in_top2": "pairs in top two", "false_alarm": "false alarms",
          "unexplained_out_of_library": "out-of-library", "names_right": "names right"}
