@@ -192,7 +192,7 @@ def run_trial(kind, seed, family, settings, exhaustive=True, readings=None,
     held = d["split"]["heldout_speeds"]
     E0 = d["gap_before"]["heldout_excess"]
     n_feat = max(d.get("n_heldout_features", 1), 1)
-    e_or, _ = feature_gap(measured, oracle, held)
+    e_or, _ = feature_gap(measured, oracle, held, truth["effects"])
     e_eff, n_eff = feature_gap(measured, free, held) if truth["effects"] else (0.0, 1)
     upd = d.get("nominal_update") or {}
     # the held-out gap before any candidate per kind of feature (each order, each band
@@ -258,7 +258,8 @@ def member_gaps(kind, seed, family):
                   flush=True)
             out[member] = None
             continue
-        E, n = feature_gap(measured, measure(clean, dict(no_noise, effects=others)), held)
+        E, n = feature_gap(measured, measure(clean, dict(no_noise, effects=others)), held,
+                           others)
         out[member] = E / max(n, 1)
     return out
 

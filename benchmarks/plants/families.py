@@ -325,14 +325,28 @@ def coast_down(family, truth, physical, clean, plant=None):
     return measure(down, dict(truth, **second_pass_draw(truth)))[["speed", "t", *CHANNELS]]
 
 
-def feature_gap(measured, predicted, speeds):
-    """Held-out excess gap (the diagnosis's statistic) of ``predicted`` records."""
+def runout_vectors(effects):
+    """The probes' runout of ``effects`` (a truth's, as :func:`measure` applies it) as
+    order vectors ``{channel: {order: complex}}`` (m), the form the comparison leaves
+    out of its tolerances (``sknarx.gap.gapmap.compare``); None without a runout."""
+    ro = effects.get("runout")
+    if ro is None:
+        return None
+    return {ch: {1.0: a1 * np.exp(1j * p1), 2.0: r2 * a1 * np.exp(1j * p2)}
+            for ch, (a1, p1, r2, p2) in ro.items()}
+
+
+def feature_gap(measured, predicted, speeds, effects=None):
+    """Held-out excess gap (the diagnosis's statistic) of ``predicted`` records, which
+    hold the measurement effects of ``effects`` (a truth's): their runout is compared as
+    the diagnosis compares a fitted one, its vectors kept out of the tolerances."""
     from sknarx.gap.features import order_features
     from sknarx.gap.gapmap import compare, gap_statistic
 
     m = order_features(measured, list(CHANNELS), 0.0)
     p = order_features(predicted, list(CHANNELS), 0.0)
-    cmp = compare(m[m.speed.isin(speeds)], p[p.speed.isin(speeds)])
+    cmp = compare(m[m.speed.isin(speeds)], p[p.speed.isin(speeds)],
+                  probe_vectors=runout_vectors(effects or {}))
     return gap_statistic(cmp), len(cmp)
 
 

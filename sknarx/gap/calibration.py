@@ -376,9 +376,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             if isinstance(f, Exception):
                 raise f
             _, Sc, se_s, _ = f
-            Sc, _ = project(Sc, se_s)
+            Sc, _, added = project(Sc, se_s)
             rs = [fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                                model_tol=tol, whirl=b) for b in bases]
+                                model_tol=tol, whirl=b, offset=added) for b in bases]
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             rs = [np.full(size, 1e3) for _ in bases]
         return [r if np.all(np.isfinite(r)) else np.full(size, 1e3) for r in rs]
@@ -408,7 +408,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
-            _, vectors = project(Sc, se_s)
+            _, vectors, _ = project(Sc, se_s)
             for i, cls in enumerate(classes):
                 if getattr(cls, "projected_orders", None):
                     cal.effect_params[i] = {"vectors": cls.from_projection(vectors).vectors}
@@ -528,16 +528,20 @@ def _projection(classes, keys, order_k, Mc, se_m):
     groups = [g for g in groups if g[2].size]
 
     def project(Sc, se_s):
+        """``(Sc + vectors, vectors, added)``: ``added`` the vector each feature got
+        (None without projected effects), for the comparison's tolerances to leave out."""
         vectors = {}
         if not groups:
-            return Sc, vectors
+            return Sc, vectors, None
         Sc = Sc.copy()
+        added = np.zeros(Sc.size, complex)
         w = 1.0 / np.maximum(se_m**2 + se_s**2, 1e-300)
         for ch, k, idx in groups:
             v = complex(np.sum(w[idx] * (Mc[idx] - Sc[idx])) / np.sum(w[idx]))
             Sc[idx] += v
+            added[idx] = v
             vectors.setdefault(ch, {})[k] = v
-        return Sc, vectors
+        return Sc, vectors, added
 
     project.active = bool(groups)
     project.n_values = 2 * len(groups)  # real and imaginary part of each vector
@@ -578,5 +582,11 @@ def heldout_gap(model: SweepModel, meas_feats, speeds, cal: Calibration, classes
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = model.features(speeds, nuis, effects)
-    cmp = compare(meas_feats[meas_feats.speed.isin(speeds)], sim)
+    # a fitted runout's vectors are the probes', not the rotor's: the comparison's
+    # tolerances leave them out as the calibration's did
+    vectors = {}
+    for e in effects:
+        for ch, by_order in getattr(e, "order_vectors", dict)().items():
+            vectors.setdefault(ch, {}).update(by_order)
+    cmp = compare(meas_feats[meas_feats.speed.isin(speeds)], sim, probe_vectors=vectors)
     return gap_statistic(cmp), cmp

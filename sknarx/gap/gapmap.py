@@ -24,7 +24,7 @@ import pandas as pd
 
 from .features import ORDER_LABELS
 
-__all__ = ["compare", "regions", "gap_statistic", "true_runs"]
+__all__ = ["compare", "regions", "gap_statistic", "true_runs", "probe_offsets"]
 
 
 def true_runs(mask, max_hole: int = 0) -> list[tuple[int, int]]:
@@ -144,7 +144,7 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
 
 
 def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL):
+                max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL, offset=None):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
     ``(M - S) / sigma`` per feature, complex, and the phase-aligned measured ``M``.
 
@@ -161,34 +161,47 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
       its harmonics there are off by ``k`` times as much, and counting that again would
       blame a candidate for the 1x model error the update already admitted. Where the
       1x tolerance is nil (a disk, an own-model plant) nothing turns.
+
+    ``offset`` (complex, per feature; None: nothing) is the part of ``Sc`` that is no
+    response of the rotor: a probe's constant runout vectors, which a candidate models
+    exactly and the measurement holds as well. The difference ``M - Sc`` keeps it; every
+    tolerance that scales with the prediction (``rtol``, ``harmonic_rtol``, the harmonics'
+    turn and the whirl's sense) is taken of the rotor's part, ``Sc - offset`` and
+    ``M - offset``. Taken of the whole, a 30 um runout beside a journal's 5 um orbit
+    would widen that journal's 1x tolerance six-fold and its 2x tolerance to 0.3 of the
+    runout's 2x, hiding from the comparison what the rotor beside the runout does.
     """
     lim = np.radians(max_offset_deg)
     is1 = order_k == 1.0
     n_speeds = int(speed_idx.max()) + 1 if speed_idx.size else 0
     delta = np.angle(_per_group(speed_idx[is1], Mc[is1] * np.conj(Sc[is1]), n_speeds))
+    # the keyphasor turns a probe's runout with the rotor's response: aligned as a whole
     M = Mc * np.exp(-1j * order_k * np.clip(delta, -lim, lim)[speed_idx])
+    v = 0.0 if offset is None else offset
+    R = Sc - v  # the rotor's response, what model-form tolerances are shares of
     tol = np.zeros(Mc.size) if model_tol is None else model_tol
     if np.any(tol[is1] > 0):
         n_groups = int(group_idx.max()) + 1
         d = np.zeros(n_groups)
         bound = np.zeros(n_groups)
-        d[group_idx[is1]] = np.angle(M[is1] * np.conj(Sc[is1]))
+        d[group_idx[is1]] = np.angle((M - v)[is1] * np.conj(R[is1]))
         bound[group_idx[is1]] = np.arcsin(np.clip(
-            tol[is1] / np.maximum(np.abs(Sc[is1]), 1e-300), 0.0, 1.0))
+            tol[is1] / np.maximum(np.abs(R[is1]), 1e-300), 0.0, 1.0))
         turn = np.clip(d, -bound, bound)[group_idx]
-        M = np.where(order_k >= 2.0, M * np.exp(-1j * order_k * turn), M)
+        # a runout's harmonic is fixed to the shaft, not locked to the orbit: it stays
+        M = np.where(order_k >= 2.0, v + (M - v) * np.exp(-1j * order_k * turn), M)
     nons = order_k == 0.0
     harmonic = ~nons & ~is1
     noise = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2,
                      se_m**2 + se_s**2)
-    var = noise + (rtol * np.abs(Sc)) ** 2 + tol**2
-    var = var + np.where(harmonic, (harmonic_rtol * np.minimum(np.abs(M), np.abs(Sc))) ** 2,
-                         0.0)
+    var = noise + (rtol * np.abs(R)) ** 2 + tol**2
+    var = var + np.where(harmonic, (harmonic_rtol * np.minimum(np.abs(M - v), np.abs(R)))
+                         ** 2, 0.0)
     d = (M - Sc) / np.sqrt(np.maximum(var, 1e-300))
     if whirl is not None and whirl[0].size:
         ix, iy, tol_b = whirl
         d[ix], d[iy] = _whirl_whitened(M[ix] - Sc[ix], M[iy] - Sc[iy], var[ix], var[iy],
-                                       tol[ix], tol[iy], tol_b, Sc[ix], Sc[iy])
+                                       tol[ix], tol[iy], tol_b, R[ix], R[iy])
     return d, M
 
 
@@ -204,8 +217,26 @@ def feature_layout(index: pd.MultiIndex):
     return order_k, speed_idx, group_idx
 
 
+def probe_offsets(index: pd.MultiIndex, vectors: dict | None) -> np.ndarray | None:
+    """Each feature's constant probe vector (complex, m) from ``vectors``, ``{channel:
+    {order: complex}}`` (a fitted runout's, see ``ProbeRunout.order_vectors``), in the
+    order of ``index`` (``speed, window, channel, feature``); 0 where a channel or
+    order has none, None without ``vectors``."""
+    if not vectors:
+        return None
+    frame = index.to_frame(index=False)
+    order_k = frame["feature"].map(ORDER_K).fillna(0.0).to_numpy(dtype=float)
+    channel = frame["channel"].astype(str).to_numpy()
+    out = np.zeros(len(frame), complex)
+    for ch, by_order in vectors.items():
+        for k, v in by_order.items():
+            out[(channel == ch) & (order_k == float(k))] = complex(v)
+    return out
+
+
 def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
-            max_offset_deg: float = 5.0, harmonic_rtol: float = HARMONIC_RTOL) -> pd.DataFrame:
+            max_offset_deg: float = 5.0, harmonic_rtol: float = HARMONIC_RTOL,
+            probe_vectors: dict | None = None) -> pd.DataFrame:
     """Feature-by-feature gap between measured and simulated order features.
 
     ``harmonic_rtol`` is the harmonics' share of model-form tolerance
@@ -219,6 +250,11 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     ``whirl_tol`` column (m) each probe pair's 1x is compared in its forward and
     backward whirl, the 1x model-form tolerance on the forward whirl only (see
     ``_whirl_whitened``); the table stays one row per channel.
+
+    ``probe_vectors`` (``{channel: {order: complex}}``, m) are constant vectors ``sim``
+    holds that are no response of the rotor -- a fitted probe runout's: the tolerances
+    that scale with the simulation are taken of the rotor's part alone (see
+    ``_normalised``), so that a large runout does not widen them.
     """
     key = ["speed", "window", "channel", "feature"]
     m = meas.set_index(key)
@@ -229,7 +265,8 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
     tol = model_tol(m)
     d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k, speed_idx,
                        group_idx, tol, rtol, max_offset_deg,
-                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol)
+                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol,
+                       probe_offsets(m.index, probe_vectors))
     z2 = np.abs(d) ** 2
     expect = np.where(order_k == 0.0, 1.0, 2.0)
     out = m.index.to_frame(index=False)
@@ -242,13 +279,14 @@ def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
 
 
 def fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, rtol=0.01,
-                  max_offset_deg=5.0, model_tol=None, whirl=None):
+                  max_offset_deg=5.0, model_tol=None, whirl=None, offset=None):
     """Normalised residuals of aligned feature arrays (the calibration's inner loop), as
     :func:`compare` computes them; the layout from :func:`feature_layout`, ``model_tol``
     (m) per feature, ``whirl`` the probe pairs from :func:`whirl_layout` (None: channel
-    by channel)."""
+    by channel), ``offset`` the constant probe vectors ``Sc`` holds (complex, m, per
+    feature; see :func:`probe_offsets`)."""
     d = _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                    max_offset_deg, whirl)[0]
+                    max_offset_deg, whirl, offset=offset)[0]
     return np.concatenate([d.real, d.imag])
 
 

@@ -898,6 +898,13 @@ class ProbeRunout(Effect):
         return cls(vectors={ch: (complex(v.get(1.0, 0.0)), complex(v.get(2.0, 0.0)))
                             for ch, v in vectors.items()})
 
+    def order_vectors(self) -> dict:
+        """The per-probe vectors as ``{channel: {order: complex}}`` (m), the form
+        :meth:`from_projection` takes: what this runout adds to each probe's order
+        features. The shared vector (``amplitude``) is not included."""
+        return {ch: {1.0: complex(v1), 2.0: complex(v2)}
+                for ch, (v1, v2) in self.vectors.items()}
+
     def measure(self, table, rng, context=None):
         phi = np.asarray(table["phi"])
         if self.amplitude:
