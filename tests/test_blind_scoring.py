@@ -1023,6 +1023,25 @@ def test_the_noise_referenced_shrink_on_the_package_rules_runs_moves_top1_only()
     assert one["second"]["unexplained_out_of_library"] == [55, 77]
 
 
+def _the_65000_run(family):
+    """The 65000 run's ``family`` as its report's rule decided it (``ran``), its logged
+    trials (each measured in two passes) and the package's rule of now (the shrink above
+    the noise), which is checked to change no verdict of either plant."""
+    ran, evals = _logged_run("results/bench_gap_blind_65000_ed0d201.json", "ed0d201")
+    package = replace(ran, noise_per_feature=DiagnosisSettings().noise_per_feature)
+    assert _changed_verdicts(evals, ran, package) == set()
+    recs = evals[family]
+    assert all("passes" in r for r in recs)
+    return ran, recs, package
+
+
+def _single_misses(recs, s):
+    """``{seed: verdict}`` of the detectable singles ``s`` decides wrong."""
+    return {r["seed"]: blind.verdict(r, s)[0] for r in recs
+            if blind.detectable(r, s) and isinstance(blind.truth_label(r, s), str)
+            and not blind.right(r, s)}
+
+
 def test_the_65000_runs_ross_half_in_two_passes_gives_its_report():
     """The 65000 run's ROSS half (docs/gap_validation.md, *The 65000 run's ROSS half*):
     the package with partners searched from 0.1, two passes, 68 trials of which ROSS's
@@ -1030,21 +1049,16 @@ def test_the_65000_runs_ross_half_in_two_passes_gives_its_report():
     above the noise no verdict changes; pairs in the top two 6/8 (missed: anisotropy +
     runout 65036, its anisotropy followed by the update, and crack + runout 65062);
     every top-1 miss names the right effect with a partner."""
-    ran, evals = _logged_run("results/bench_gap_blind_65000_ed0d201.json", "ed0d201")
+    ran, recs, package = _the_65000_run("ross")
     assert ran.noise_per_feature is None and ran.pair_search_trigger == 0.1
     _assert_decided_as(ran, DiagnosisSettings(), but=("noise_per_feature",))
-    recs = evals["ross"]
-    assert len(recs) == 63 and all("passes" in r for r in recs)
-    package = replace(ran, noise_per_feature=DiagnosisSettings().noise_per_feature)
-    assert _changed_verdicts(evals, ran, package) == set()
+    assert len(recs) == 63
     sc = blind.score(recs, package)
     assert (sc["top1"], sc["pairs_in_top2"]) == (pytest.approx(23 / 27), pytest.approx(6 / 8))
     assert (sc["false_alarm"], sc["unexplained_out_of_library"]) == (0.0, pytest.approx(13 / 14))
-    misses = {r["seed"]: blind.verdict(r, package)[0] for r in recs
-              if blind.detectable(r, package) and isinstance(blind.truth_label(r, package), str)
-              and not blind.right(r, package)}
-    assert misses == {65001: ["anisotropy", "rub"], 65061: ["anisotropy", "rub"],
-                      65008: ["crack", "misalignment"], 65038: ["crack", "misalignment"]}
+    assert _single_misses(recs, package) == {
+        65001: ["anisotropy", "rub"], 65061: ["anisotropy", "rub"],
+        65008: ["crack", "misalignment"], 65038: ["crack", "misalignment"]}
 
 
 def test_the_65000_runs_second_half_in_two_passes_gives_its_report():
@@ -1056,19 +1070,14 @@ def test_the_65000_runs_second_half_in_two_passes_gives_its_report():
     the relaxing bows' passes differ."""
     import rescore_gap_blind as rescore
 
-    ran, evals = _logged_run("results/bench_gap_blind_65000_ed0d201.json", "ed0d201")
-    recs = evals["second"]
-    assert len(recs) == 68 and all("passes" in r for r in recs)
-    package = replace(ran, noise_per_feature=DiagnosisSettings().noise_per_feature)
-    assert _changed_verdicts(evals, ran, package) == set()
+    _, recs, package = _the_65000_run("second")
+    assert len(recs) == 68
     sc = blind.score(recs, package)
     assert (sc["top1"], sc["pairs_in_top2"]) == (pytest.approx(29 / 32), pytest.approx(7 / 9))
     assert (sc["false_alarm"], sc["unexplained_out_of_library"]) == (0.0, 1.0)
     assert sc["n_out_of_library"] == 13 and sc["shrink_vs_oracle_median"] >= 0.9
-    misses = {r["seed"]: blind.verdict(r, package)[0] for r in recs
-              if blind.detectable(r, package) and isinstance(blind.truth_label(r, package), str)
-              and not blind.right(r, package)}
-    assert misses == {65010: "unexplained", 65058: "unexplained", 65040: "rub"}
+    assert _single_misses(recs, package) == {
+        65010: "unexplained", 65058: "unexplained", 65040: "rub"}
     assert {r["seed"] for r in recs if blind.passes_differ(r, package)} == {
         r["seed"] for r in recs if r["kind"] == "thermal-bow"} == {65007, 65023, 65039, 65055}
     one = blind.score([rescore.first_pass_only(r) for r in recs], package)
