@@ -35,9 +35,8 @@ from bench_gap_blind import (  # noqa: E402
     verdict,
     with_member_gaps,
 )
+from misses_gap_blind import single_leaves  # noqa: E402
 from rescore_gap_blind import frozen_thresholds  # noqa: E402
-
-from sknarx.gap.core import effect_names  # noqa: E402
 
 #: the 65000 run's report, its logs' code and the trials re-diagnosed here
 REPORT = "results/bench_gap_blind_65000_ed0d201.json"
@@ -61,17 +60,10 @@ def logged():
     return {r["seed"]: r for r in with_member_gaps(recs)}
 
 
-def runout_leaves(rec):
-    """What the runout alone leaves per held-out feature (None: not fitted alone)."""
-    n = rec["n_features"]
-    alone = [r["E"] / n for r in rec["ranking"] if effect_names(r) == ("runout",)]
-    return min(alone) if alone else None
-
-
 def summary(rec, rule):
     return {"verdict": verdict(rec, rule)[0], "truth": truth_label(rec, rule),
             "top2": sorted(top2_names(rec)), "e0": rec["e0"],
-            "runout_alone_leaves": runout_leaves(rec),
+            "runout_alone_leaves": single_leaves(rec, "runout"),
             "member_gap": rec.get("member_gap"),
             "oracle_shrink": rec["oracle_shrink"]}
 

@@ -107,11 +107,17 @@ def alone_leaves(decided, family, effect, kind):
         for rec in evals.get(family, []):
             if not detectable(rec, rule) or _label(rec["kind"]) != _label(kind):
                 continue
-            left = [r["E"] / rec["n_features"] for r in rec["ranking"]
-                    if effect_names(r) == (effect,)]
-            if left:
-                out[rec["seed"]] = left[0]
+            left = single_leaves(rec, effect)
+            if left is not None:
+                out[rec["seed"]] = left
     return out
+
+
+def single_leaves(rec, effect):
+    """What ``effect`` fitted alone leaves on one logged trial (held-out excess per
+    feature, its first single entry in the ranking); None where it was not fitted alone."""
+    return next((r["E"] / rec["n_features"] for r in rec["ranking"]
+                 if effect_names(r) == (effect,)), None)
 
 
 def top2_searched_from(rec, trigger):

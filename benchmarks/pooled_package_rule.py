@@ -91,12 +91,23 @@ def misses(decided):
     return out
 
 
+#: every run the package's rule of now decides in two passes
+PACKAGE_RULE_RUNS = RUNS + TWO_PASS_RUNS + LATER_RUNS
+
+
+def decided_by_package_rule(runs=PACKAGE_RULE_RUNS):
+    """``runs`` as ``(rule, logged trials by family)``, each trial with its coast-down
+    and each rule the run's frozen thresholds with the package's verdict share."""
+    noise = DiagnosisSettings().noise_per_feature
+    return [(replace(rule, noise_per_feature=noise), evals)
+            for rule, evals in with_coast_downs(decided_runs(runs))]
+
+
 def main(argv=None):
-    runs = RUNS + TWO_PASS_RUNS + LATER_RUNS
+    runs = PACKAGE_RULE_RUNS
     print(f"loading the logs of {len(runs)} runs", file=sys.stderr)
     noise = DiagnosisSettings().noise_per_feature
-    decided = [(replace(rule, noise_per_feature=noise), evals)
-               for rule, evals in with_coast_downs(decided_runs(runs))]
+    decided = decided_by_package_rule(runs)
     got = pooled(decided)
     rows = []
     for fam, rates in got.items():

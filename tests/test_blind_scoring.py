@@ -1092,10 +1092,7 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
     mostly followed by the update (9) or named with a partner (6)."""
     import pooled_package_rule as ppr
 
-    runs = ppr.RUNS + ppr.TWO_PASS_RUNS + ppr.LATER_RUNS
-    noise = DiagnosisSettings().noise_per_feature
-    decided = [(replace(rule, noise_per_feature=noise), evals)
-               for rule, evals in ppr.with_coast_downs(ppr.decided_runs(runs))]
+    decided = ppr.decided_by_package_rule()
     got = ppr.pooled(decided)
     assert [got["ross"][k] for k in ("top1", "pairs_in_top2", "false_alarm",
                                      "unexplained_out_of_library")] == [
