@@ -12,6 +12,7 @@ import argparse
 import logging
 import os
 import shlex
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -27,6 +28,8 @@ logger = logging.getLogger("sknarx")
 EFFECTS = ("rub", "misalignment", "crack", "looseness", "clearance", "anisotropy", "runout",
            "speed-fluctuation")
 CHANNELS = ("xO1", "yO1", "xO2", "yO2", "xA", "yA", "xB", "yB")
+#: where ``sknarx gap`` keeps its finished steps inside ``--out`` until the outputs exist
+CHECKPOINT_DIR = ".checkpoint"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -142,13 +145,17 @@ def _gap(args) -> int:
             from .gap import DiagnosisSettings
 
             kw["settings"] = replace(DiagnosisSettings(), update_nominal=False)
+        # each finished step is kept until the outputs are written: a stopped run
+        # (Ctrl-C, a killed job) started again with the same options resumes
+        kept = out / CHECKPOINT_DIR
         result = diagnose(measured, base=base, channels=args.channels, progress=progress,
-                          **kw, **kw_pass)
+                          checkpoint=kept, **kw, **kw_pass)
         narx = None
         if not args.no_narx and result["verdict"] != "no-gap":
             narx = narx_view_of(result, measured, base)
             progress("NARX view")
         doc = write_gap_outputs(result, out, _command_line(), narx)
+        shutil.rmtree(kept, ignore_errors=True)
     print(_verdict_line(doc))
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
     return 0
@@ -222,7 +229,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="measured data: a .csv (comma or semicolon) or .parquet file")
     g.add_argument("--rotor", help="rotor description (.toml, .yaml or .json); default: "
                    "the paper's rotor")
-    g.add_argument("--out", required=True, help="output folder (created)")
+    g.add_argument("--out", required=True,
+                   help=f"output folder (created); a stopped run started again with the "
+                   f"same options resumes from its {CHECKPOINT_DIR} folder")
     g.add_argument("--channels", nargs="+", choices=CHANNELS, metavar="CHANNEL",
                    help=f"channels to use (default: all DOF columns); from {', '.join(CHANNELS)}")
     g.add_argument("--candidates", nargs="+", choices=EFFECTS, metavar="EFFECT",
@@ -269,7 +278,10 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except KeyboardInterrupt:
-        print("sknarx: interrupted", file=sys.stderr)
+        kept = Path(args.out) / CHECKPOINT_DIR if args.command == "gap" else None
+        print("sknarx: interrupted" + (
+            f"; the same command again resumes from {kept}" if kept and kept.exists()
+            else ""), file=sys.stderr)
         return 130
     except (ValueError, OSError, ImportError) as exc:
         # the library validates user input with these, and says what to fix

@@ -409,13 +409,31 @@ def test_blind_subset_says_no_gap_on_effect_free_data():
 
 @pytest.mark.slow
 def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
+    """As a user runs it, stopped with Ctrl-C once the nominal update is done and
+    started again: the second run resumes, writes the outputs, and removes the steps
+    it kept."""
+    import signal
+    import time
+
     measured, _ = runout_trial
     path = tmp_path / "measured.csv"
     measured.to_csv(path, index=False)
-    res = subprocess.run([sys.executable, "-m", "sknarx", "gap", "--measured", str(path),
-                          "--out", str(tmp_path / "out"), "--candidates", "runout", "clearance",
-                          "--quiet"], capture_output=True, text=True, timeout=900)
+    command = [sys.executable, "-m", "sknarx", "gap", "--measured", str(path),
+               "--out", str(tmp_path / "out"), "--candidates", "runout", "clearance"]
+    kept = tmp_path / "out" / ".checkpoint"
+    first = subprocess.Popen(command + ["--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 600
+    while len(list(kept.glob("update-*.pkl"))) < 1 and first.poll() is None:
+        assert time.monotonic() < deadline, "no checkpoint step written"
+        time.sleep(0.2)
+    first.send_signal(signal.SIGINT)
+    _, err = first.communicate(timeout=120)
+    assert first.returncode == 130, err[-2000:]
+    assert f"the same command again resumes from {kept}" in err
+    res = subprocess.run(command, capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
+    assert re.search(r"resuming from [1-9]\d* finished step", res.stderr), res.stderr[-2000:]
+    assert not kept.exists()
     doc = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     # the keys docs/gap.md promises (an effect verdict: the conditional ones too)
     for key in ("verdict", "ranking", "where", "shrink", "gap_before", "n_heldout_features",

@@ -49,6 +49,7 @@ from .calibration import (
     heldout_gap,
     search_vector,
 )
+from .checkpoint import Checkpoint, NoCheckpoint
 from .core import (
     CandidateFit,
     FrontEnd,
@@ -287,9 +288,12 @@ class _SweepFrontEnd(FrontEnd):
     """The time-series front end's fits: the nonlinear simulator (with the nuisance
     scalars) calibrated on the training speeds' order features."""
 
-    def __init__(self, model, meas, train, held, cmp0, settings, nuis_start):
+    def __init__(self, model, meas, train, held, cmp0, settings, nuis_start,
+                 checkpoint=None):
         self.model, self.meas, self.train, self.held = model, meas, train, held
         self.cmp0, self.settings, self.nuis_start = cmp0, settings, nuis_start
+        # each calibration and held-out comparison is a step a rerun reads back
+        self.checkpoint = checkpoint or NoCheckpoint()
         self._lead_x = None
         # each probe's cost by effects, discrete settings and point: a pair's probes
         # are its partner's probes on top of the lead, scored once
@@ -302,11 +306,9 @@ class _SweepFrontEnd(FrontEnd):
         """The candidate fit of ``cal``; with ``classes``, those it calibrated, where a
         class not named in ``names`` is the linear form of a member (model error)."""
         classes = list(classes) if classes is not None else [EFFECTS[n] for n in names]
-        try:
-            E, cmp = heldout_gap(self.model, self.meas, self.held, cal, classes)
-        except SimulationDivergenceError:
-            # calibrated on the training speeds, unstable at a held-out one: rejected
-            E, cmp = float("inf"), None
+        E, cmp = self.checkpoint.step(
+            "heldout", [self.model, self.held, classes, cal],
+            lambda: _heldout_or_diverged(self.model, self.meas, self.held, cal, classes))
         plain = _plain_params(classes, cal.effect_params)
         params = [p for c, p in zip(classes, plain, strict=True) if c.name in names]
         error = {c.name: p for c, p in zip(classes, plain, strict=True) if c.name not in names}
@@ -324,12 +326,15 @@ class _SweepFrontEnd(FrontEnd):
 
     def _calibrate(self, names, classes=None, **kw):
         classes = classes if classes is not None else [EFFECTS[n] for n in names]
-        return calibrate(self.model, self.meas, self.train, classes,
-                         **{"max_nfev": self.settings.max_nfev,
-                            "jacobian_refresh": self.settings.jacobian_refresh,
-                            "settled_sigma": self.settings.settled_sigma,
-                            "probes_per_parameter": self.settings.probes_per_parameter,
-                            "probe_cache": self._probe_costs, **kw})
+        kw = {"max_nfev": self.settings.max_nfev,
+              "jacobian_refresh": self.settings.jacobian_refresh,
+              "settled_sigma": self.settings.settled_sigma,
+              "probes_per_parameter": self.settings.probes_per_parameter, **kw}
+        # the probe cache only saves work, it changes no result: not part of the key
+        return self.checkpoint.step(
+            "calibrate", [self.model, self.train, list(classes), kw],
+            lambda: calibrate(self.model, self.meas, self.train, classes,
+                              probe_cache=self._probe_costs, **kw))
 
     def _best(self, names, **kw):
         # each discrete setting (a crack's station, a rub's disk) converged on the
@@ -476,7 +481,7 @@ class _SweepFrontEnd(FrontEnd):
 def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channels=None,
              candidates=LIBRARY, settings: DiagnosisSettings | None = None,
              progress=None, exhaustive: bool = False, readings=None,
-             second_pass: pd.DataFrame | None = None) -> GapDiagnosis:
+             second_pass: pd.DataFrame | None = None, checkpoint=None) -> GapDiagnosis:
     """Diagnose a stepped-speed measurement against the nominal simulator.
 
     Parameters
@@ -514,6 +519,15 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         ``passes`` says where the passes differ and what ``measured`` alone concluded
         (:func:`sknarx.gap.core.with_passes`). The candidates are fitted to
         ``measured`` alone.
+    checkpoint : str or Path, optional
+        A directory that keeps each finished step (the nominal update, its prediction
+        spread, every calibration and held-out comparison), written whole or not at all
+        (:mod:`sknarx.gap.checkpoint`). A rerun on the same inputs reads them back, so a
+        stopped diagnosis resumes where it stopped and gives the same result as an
+        uninterrupted run; a rerun with other data, rotor, settings, candidates,
+        readings or package source starts the directory over. The directory is kept
+        afterwards (a rerun then takes seconds); delete it when done. None: nothing is
+        kept.
 
     Returns
     -------
@@ -546,13 +560,23 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
                         "the dead band (floor %.3g): %s", passes.statistic, passes.floor,
                         "the rotor changed between the passes" if passes.changed
                         else "the passes agree")
-        return with_passes(_diagnose(measured, base, channels, candidates, settings,
-                                     progress, exhaustive, check_readings(readings, base)),
-                           passes)
+        readings = check_readings(readings, base)
+        kept = NoCheckpoint()
+        if checkpoint is not None:
+            kept = Checkpoint(checkpoint, {
+                "measured": measured, "base": base, "channels": channels,
+                "candidates": list(candidates), "settings": settings,
+                "exhaustive": exhaustive, "readings": readings})
+        result = _diagnose(measured, base, channels, candidates, settings, progress,
+                           exhaustive, readings, kept)
+        if checkpoint is not None:
+            logger.info("checkpoint %s: %d step(s) read back, %d computed", checkpoint,
+                        kept.reused, kept.computed)
+        return with_passes(result, passes)
 
 
 def _diagnose(measured, base, channels, candidates, settings, progress, exhaustive,
-              readings):
+              readings, kept):
     from .measured import check_measured
 
     settings = settings or DiagnosisSettings()
@@ -580,8 +604,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     tick("measured order features")
 
     def update_from(start):
-        return _update_nominal(meas, train, channels, start, info, transient_s, settle_s,
-                               settings)
+        return kept.step("update", start, lambda: _update_nominal(
+            meas, train, channels, start, info, transient_s, settle_s, settings))
 
     update = None
     if settings.update_nominal:
@@ -594,19 +618,23 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
     # the updated nominal model's features, simulated once: the model-form tolerance
     # reads them at every speed, the nuisance start at the training speeds
     nuis0 = np.array([v[3] for v in NUISANCE.values()])
-    nominal_all = model.features(speeds, nuis0)
+    nominal_all = kept.step("features", [model, speeds, nuis0],
+                            lambda: model.features(speeds, nuis0))
     spread, n_points = None, 0
     if update is not None and settings.update_spread:
         logger.info("the updated rotor's harmonics over its parameters' uncertainty")
-        spread, n_points = _prediction_spread(model, speeds, update, nominal_all, nuis0)
+        spread, n_points = kept.step(
+            "spread", [model, speeds, update.nominal, update.theta, update.covariance],
+            lambda: _prediction_spread(model, speeds, update, nominal_all, nuis0))
         tick("update uncertainty")
     meas = _with_model_tolerance(meas, nominal_all, update, spread)
     logger.info("calibrating the nominal model's nuisance scalars on %d training speeds",
                 train.size)
 
-    cal0, E0, cmp0 = _nuisance_fit(model, meas, train, held, settings,
-                                   nominal_all[nominal_all.speed.isin(train)])
-    _, cmp_all = heldout_gap(model, meas, speeds, cal0, ())
+    cal0, E0, cmp0 = kept.step("nuisance", [model, train, held], lambda: _nuisance_fit(
+        model, meas, train, held, settings, nominal_all[nominal_all.speed.isin(train)]))
+    _, cmp_all = kept.step("heldout", [model, speeds, [], cal0],
+                           lambda: heldout_gap(model, meas, speeds, cal0, ()))
     tick("nuisance calibration")
     e0 = E0 / max(len(cmp0), 1)
     n_features = max(len(cmp0), 1)
@@ -655,7 +683,8 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
         doc["verdict"] = "no-gap"
         return result
 
-    front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, _candidate_start(cal0))
+    front = _SweepFrontEnd(model, meas, train, held, cmp0, settings, _candidate_start(cal0),
+                           kept)
     logger.info("held-out gap %.3g per feature (no-gap floor %.3g)%s: fitting %d effect "
                 "candidate(s)", e0, settings.no_gap_per_feature,
                 "".join(f", {k} mean z2 {v:.3g} over its floor {floors[k]:.3g}"
@@ -669,7 +698,7 @@ def _diagnose(measured, base, channels, candidates, settings, progress, exhausti
             warnings.simplefilter("ignore")
             ranked, doc["rotor_readings"] = _in_other_readings(
                 readings, ranked, fronts, nominal_base, update_from, model, meas,
-                (train, held), settings, (E0, cmp0, n_features), tick)
+                (train, held), settings, (E0, cmp0, n_features), tick, kept)
     choice = decide(e0, ranked, settings, n_features, over)
     if isinstance(choice, dict) and choice["_fit"].details.get("discrete_settings"):
         with warnings.catch_warnings():
@@ -706,6 +735,15 @@ def _nuisance_fit(model, meas, train, held, settings, nominal_train):
     return cal0, E0, cmp0
 
 
+def _heldout_or_diverged(model, meas, held, cal, classes):
+    """:func:`heldout_gap` of a candidate's fit; a fit calibrated on the training speeds
+    that is unstable at a held-out one is rejected: infinite excess, no table."""
+    try:
+        return heldout_gap(model, meas, held, cal, classes)
+    except SimulationDivergenceError:
+        return float("inf"), None
+
+
 def _candidate_start(cal0):
     """Where candidates start: the nuisance-only fit's unbalance at nominal stiffness and
     damping scales. The nuisance-only fit absorbs what it can of an effect (a crack's
@@ -718,15 +756,15 @@ def _candidate_start(cal0):
 
 
 def _in_other_readings(readings, ranked, fronts, nominal_base, update_from, model, meas,
-                       split, settings, before, tick):
+                       split, settings, before, tick, kept):
     """The ranking with each other reading's fits added (:mod:`sknarx.gap.readings`):
     per reading, the nominal update started at it (``update_from``: the update from a
     rotor), its nuisance-only model (model error alone) and the search over the
     primary ranking's ``settings.reading_contenders`` best singles, all against the
     primary's features ``meas`` and tolerance (``before``: its held-out excess,
     comparison table and feature count; ``split``: training and held-out speeds).
-    ``fronts`` gains each reading's front end by label. Returns the ranking and the
-    document's ``rotor_readings`` entries."""
+    ``fronts`` gains each reading's front end by label; ``kept`` is the diagnosis's
+    checkpoint. Returns the ranking and the document's ``rotor_readings`` entries."""
     train, held = split
     E0, cmp0, n_features = before
     names = reading_contenders(ranked, settings.reading_contenders)
@@ -743,14 +781,14 @@ def _in_other_readings(readings, ranked, fronts, nominal_base, update_from, mode
             update = update_from(base)
             base = update.params
         model_r = dataclasses.replace(model, base=base)
-        cal, E, cmp = _nuisance_fit(model_r, meas, train, held, settings,
-                                    model_r.features(train, nuis0))
+        cal, E, cmp = kept.step("nuisance", [model_r, train, held], lambda m=model_r: _nuisance_fit(
+            m, meas, train, held, settings, m.features(train, nuis0)))
         alone = CandidateFit(
             names=(), params={}, params_std={}, n_params=0, heldout_excess=E, cmp=cmp,
             details={"nuisance": cal.nuisance, "rotor_reading": label,
                      "evidence": table_evidence(cmp0, cmp)}, state=cal)
         front = _SweepFrontEnd(model_r, meas, train, held, cmp0, settings,
-                               _candidate_start(cal))
+                               _candidate_start(cal), kept)
         fronts[label] = front
         found = search(front, names, E0, cmp0, n_features, settings) if names else []
         for f in (r["_fit"] for r in found):
