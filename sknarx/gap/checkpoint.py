@@ -9,10 +9,10 @@ A rerun on the same inputs reads the finished steps back and computes only the r
 so it gives the same diagnosis as an uninterrupted run.
 
 The directory belongs to one set of inputs: the measured data, the rotor, the settings,
-the candidates, the readings and the package's own source. A rerun with anything of
-these changed starts the directory over rather than mix steps of two diagnoses. The
-steps are pickles, read back only from a directory the run itself stamped: give it a
-directory of your own, as private as the data.
+the candidates, the readings, the package's own source and its dependencies' versions.
+A rerun with anything of these changed starts the directory over rather than mix steps
+of two diagnoses. The steps are pickles, read back only from a directory the run itself
+stamped: give it a directory of your own, as private as the data.
 """
 
 from __future__ import annotations
@@ -23,12 +23,14 @@ import json
 import logging
 import pickle
 import shutil
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .._atomic import write_atomic, write_text_atomic
+from .._report import DEPENDENCIES
 
 __all__ = ["Checkpoint", "fingerprint"]
 
@@ -100,13 +102,19 @@ def fingerprint(obj) -> str:
     return h.hexdigest()
 
 
-def _source_digest() -> str:
-    """The package's own source: a step computed by other code is not reused."""
+def _code_digest() -> str:
+    """The package's own source and its dependencies' versions (numerics, compiled
+    kernels): a step computed by other code is not reused."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         h.update(str(path.relative_to(root)).encode())
         h.update(path.read_bytes())
+    for name in DEPENDENCIES:
+        try:
+            h.update(f"{name} {metadata.version(name)};".encode())
+        except metadata.PackageNotFoundError:
+            h.update(f"{name} -;".encode())
     return h.hexdigest()
 
 
@@ -139,7 +147,7 @@ class Checkpoint:
 
     def __init__(self, path, inputs):
         self.path = Path(path)
-        self.key = fingerprint([inputs, _source_digest()])
+        self.key = fingerprint([inputs, _code_digest()])
         self.reused = 0
         self.computed = 0
         stamp = self.path / _INPUTS

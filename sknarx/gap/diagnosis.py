@@ -525,9 +525,9 @@ def diagnose(measured: pd.DataFrame, base: RotorParameters | None = None, channe
         (:mod:`sknarx.gap.checkpoint`). A rerun on the same inputs reads them back, so a
         stopped diagnosis resumes where it stopped and gives the same result as an
         uninterrupted run; a rerun with other data, rotor, settings, candidates,
-        readings or package source starts the directory over. The directory is kept
-        afterwards (a rerun then takes seconds); delete it when done. None: nothing is
-        kept.
+        readings, package source or dependency versions starts the directory over.
+        The directory is kept afterwards (a rerun then takes seconds); delete it when
+        done. None: nothing is kept.
 
     Returns
     -------
