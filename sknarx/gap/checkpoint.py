@@ -185,19 +185,10 @@ class Checkpoint:
         self.computed += 1
         return value
 
-    def remove(self) -> None:
-        """Delete the directory: the diagnosis it served is complete."""
-        shutil.rmtree(self.path, ignore_errors=True)
-
 
 class NoCheckpoint:
     """Every step computed, nothing kept (no checkpoint directory given)."""
 
-    reused = computed = 0
-
     @staticmethod
     def step(what, key, compute):
         return compute()
-
-    def remove(self) -> None:
-        pass
