@@ -95,6 +95,16 @@ def test_a_checkpoint_of_other_inputs_is_started_over(tmp_path):
     assert (same.reused, same.computed) == (1, 0)
 
 
+def test_a_run_that_keeps_no_step_leaves_no_directory(tmp_path):
+    """A diagnosis that fails on the user's data before its first step (a channel the
+    file lacks) writes nothing into the output folder."""
+    measured, _ = make_trial(None, 1, speeds=SPEEDS[:3], n_samples=400)
+    with pytest.raises(ValueError, match="xB"):
+        diagnose(measured[["speed", "t", "xO1", "yO1"]], channels=["xO1", "xB"],
+                 checkpoint=tmp_path / "out" / ".checkpoint")
+    assert not (tmp_path / "out").exists()
+
+
 def test_an_unreadable_step_is_computed_again(tmp_path):
     kept = Checkpoint(tmp_path, "inputs")
     kept.step("step", "key", lambda: 1)

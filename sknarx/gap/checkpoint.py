@@ -150,6 +150,9 @@ class Checkpoint:
         self.key = fingerprint([inputs, _code_digest()])
         self.reused = 0
         self.computed = 0
+        # the directory is stamped when the first step is kept, so a run that fails
+        # before any (a user's wrong column) leaves nothing behind
+        self._stamped = False
         stamp = self.path / _INPUTS
         if stamp.exists():
             try:
@@ -157,20 +160,19 @@ class Checkpoint:
             except (OSError, ValueError):
                 old = None
             if old == self.key:
+                self._stamped = True
                 n = sum(1 for _ in self.path.glob("*.pkl"))
                 logger.info("resuming from %d finished step(s) in %s", n, self.path)
                 return
             logger.info("%s holds the steps of another diagnosis (other data, settings "
                         "or code): starting over", self.path)
             shutil.rmtree(self.path)
-        self.path.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(stamp, json.dumps({"key": self.key}))
 
     def step(self, what: str, key, compute):
         """``compute()``'s result, read back if a step ``what`` with this ``key`` (by
         value, see :func:`fingerprint`) finished before, else computed and kept."""
         file = self.path / f"{what}-{fingerprint(key)[:32]}.pkl"
-        if file.exists():
+        if self._stamped and file.exists():
             try:
                 value = pickle.loads(file.read_bytes())
             except (OSError, EOFError, pickle.UnpicklingError, AttributeError):
@@ -181,6 +183,9 @@ class Checkpoint:
                 return value
         value = compute()
         data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+        if not self._stamped:
+            write_text_atomic(self.path / _INPUTS, json.dumps({"key": self.key}))
+            self._stamped = True
         write_atomic(file, lambda tmp: Path(tmp).write_bytes(data))
         self.computed += 1
         return value
