@@ -17,7 +17,8 @@ from pathlib import Path
 
 from ._version import __version__
 
-__all__ = ["provenance", "page", "table", "figure", "quantity", "at_bound", "value_range"]
+__all__ = ["dependency_versions", "provenance", "page", "table", "figure", "quantity",
+           "at_bound", "value_range"]
 
 DEPENDENCIES = ("numpy", "scipy", "scikit-learn", "pandas", "numba", "matplotlib", "joblib")
 
@@ -45,14 +46,20 @@ def _commit() -> str | None:
         return None
 
 
-def provenance(command: str) -> dict:
-    """Version, commit, UTC date, Python and dependency versions, and the command."""
+def dependency_versions() -> dict:
+    """Each of :data:`DEPENDENCIES`' installed version (None: not installed)."""
     deps = {}
     for name in DEPENDENCIES:
         try:
             deps[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             deps[name] = None
+    return deps
+
+
+def provenance(command: str) -> dict:
+    """Version, commit, UTC date, Python and dependency versions, and the command."""
+    deps = dependency_versions()
     return {
         "sknarx_version": __version__,
         "commit": _commit(),

@@ -1622,6 +1622,7 @@ def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
     from sknarx.gap import DiagnosisSettings
     from sknarx.gap import diagnosis as dg
     from sknarx.gap.calibration import calibrate
+    from sknarx.gap.checkpoint import NoCheckpoint
     from sknarx.rotor import EFFECTS
 
     def probes(name):  # the partner's probes and its start
@@ -1635,7 +1636,8 @@ def test_a_pairs_partner_is_probed_and_fitted_at_the_pair_settings(monkeypatch):
                          max_nfev=0)
     lead = SimpleNamespace(names=("runout",), state=lead_cal)
     settings = DiagnosisSettings(pair_probes_per_parameter=8, pair_short_starts=2)
-    front = dg._SweepFrontEnd(model, meas, train, train, None, settings, cal0.x)
+    front = dg._SweepFrontEnd(model, meas, train, train, None, settings, cal0.x,
+                              NoCheckpoint())
     front.partners(lead, ["clearance"], 1)
     assert len(front._probe_costs) == probes("clearance")
     front.partners(lead, ["looseness"], 1)

@@ -23,14 +23,13 @@ import json
 import logging
 import pickle
 import shutil
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .._atomic import write_atomic, write_text_atomic
-from .._report import DEPENDENCIES
+from .._report import dependency_versions
 
 __all__ = ["Checkpoint", "fingerprint"]
 
@@ -110,11 +109,7 @@ def _code_digest() -> str:
     for path in sorted(root.rglob("*.py")):
         h.update(str(path.relative_to(root)).encode())
         h.update(path.read_bytes())
-    for name in DEPENDENCIES:
-        try:
-            h.update(f"{name} {metadata.version(name)};".encode())
-        except metadata.PackageNotFoundError:
-            h.update(f"{name} -;".encode())
+    _feed(h, dependency_versions())
     return h.hexdigest()
 
 

@@ -288,12 +288,12 @@ class _SweepFrontEnd(FrontEnd):
     """The time-series front end's fits: the nonlinear simulator (with the nuisance
     scalars) calibrated on the training speeds' order features."""
 
-    def __init__(self, model, meas, train, held, cmp0, settings, nuis_start,
-                 checkpoint=None):
+    def __init__(self, model, meas, train, held, cmp0, settings, nuis_start, checkpoint):
         self.model, self.meas, self.train, self.held = model, meas, train, held
         self.cmp0, self.settings, self.nuis_start = cmp0, settings, nuis_start
         # each calibration and held-out comparison is a step a rerun reads back
-        self.checkpoint = checkpoint or NoCheckpoint()
+        # (a NoCheckpoint computes every one)
+        self.checkpoint = checkpoint
         self._lead_x = None
         # each probe's cost by effects, discrete settings and point: a pair's probes
         # are its partner's probes on top of the lead, scored once
