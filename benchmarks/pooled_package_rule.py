@@ -53,7 +53,7 @@ from rescore_gap_blind import wilson  # noqa: E402
 from sknarx.gap import DiagnosisSettings  # noqa: E402
 
 #: runs after the 61000 run, measured in two passes, searched as the package searches
-#: now (pairs from 0.1); the 67000 run's report holds its ROSS half so far
+#: now (pairs from 0.1)
 LATER_RUNS = (PackageRun("results/bench_gap_blind_65000_ed0d201.json", "ed0d201"),
               PackageRun("results/bench_gap_blind_67000_af72500.json", "af72500"))
 #: the rates reported, with their labels

@@ -1114,13 +1114,44 @@ def test_the_67000_runs_ross_half_in_two_passes_gives_its_report():
     assert one["unexplained_out_of_library"] == pytest.approx(8 / 13)
 
 
+def test_the_67000_runs_second_half_in_two_passes_gives_its_report():
+    """The 67000 run's second-plant half (docs/gap_validation.md, *The 67000 run's second
+    half*): the same package, clone and commands as its ROSS half, 68 trials, none
+    skipped. Top-1 24/32 (three loose joints and a rub `unexplained`, a crack named a
+    rub, a misalignment named a runout, a rub with a partner, a speed fluctuation
+    followed by the update), pairs in the top two 8/9 (anisotropy + runout 67038 missed),
+    no false alarm, every out-of-library draw `unexplained` with two passes and 9/13 on
+    the first alone; only the bows' passes differ."""
+    import rescore_gap_blind as rescore
+
+    ran, evals = _logged_run("results/bench_gap_blind_67000_af72500.json", "af72500")
+    recs = evals["second"]
+    assert len(recs) == 68 and all("passes" in r for r in recs)
+    sc = blind.score(recs, ran)
+    assert (sc["top1"], sc["pairs_in_top2"]) == (pytest.approx(24 / 32), pytest.approx(8 / 9))
+    assert (sc["false_alarm"], sc["unexplained_out_of_library"]) == (0.0, 1.0)
+    assert sc["n_out_of_library"] == 13 and sc["shrink_vs_oracle_median"] >= 0.9
+    assert _single_misses(recs, ran) == {
+        67005: "runout", 67010: "unexplained", 67026: "unexplained",
+        67033: ["crack", "rub"], 67040: "rub", 67042: "unexplained", 67047: "no-gap",
+        67065: "unexplained"}
+    missed = [r["seed"] for r in recs if blind.detectable(r, ran)
+              and not isinstance(blind.truth_label(r, ran), str)
+              and not set(r["kind"]) <= blind.top2_names(r)]
+    assert missed == [67038]
+    assert {r["seed"] for r in recs if blind.passes_differ(r, ran)} == {
+        r["seed"] for r in recs if r["kind"] == "thermal-bow"} == {67007, 67023, 67039, 67055}
+    one = blind.score([rescore.first_pass_only(r) for r in recs], ran)
+    assert one["unexplained_out_of_library"] == pytest.approx(9 / 13)
+
+
 def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_figures():
     """``benchmarks/pooled_package_rule.py`` (docs/gap_validation.md): 51000-61000, the
-    65000 run and the 67000 run's ROSS half, each decided by its frozen thresholds with
-    the shrink above the noise and two passes. ROSS: top-1 195/219, pairs 51/68, no false
-    alarm in 80, out-of-library 101/110; the second plant: 198/222, 51/63, 0/63, 87/90;
-    ROSS's single misses are mostly followed by the update (10) or named with a partner
-    (7)."""
+    65000 run and the 67000 run, each decided by its frozen thresholds with the shrink
+    above the noise and two passes. ROSS: top-1 195/219, pairs 51/68, no false alarm in
+    80, out-of-library 101/110; the second plant: 222/254, 59/72, 0/72, 100/103; ROSS's
+    single misses are mostly followed by the update (10) or named with a partner (7),
+    the second plant's `unexplained` (20, its loose joints most)."""
     import pooled_package_rule as ppr
 
     decided = ppr.decided_by_package_rule()
@@ -1130,9 +1161,9 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
         [195, 219], [51, 68], [0, 80], [101, 110]]
     assert [got["second"][k] for k in ("top1", "pairs_in_top2", "false_alarm",
                                        "unexplained_out_of_library")] == [
-        [198, 222], [51, 63], [0, 63], [87, 90]]
+        [222, 254], [59, 72], [0, 72], [100, 103]]
     found = ppr.misses(decided)
     assert {k: len(v) for k, v in found["ross"]["singles"].items()} == {
         "no-gap": 10, "partner": 7, "unexplained": 6, "other": 1}
     assert {k: len(v) for k, v in found["second"]["singles"].items()} == {
-        "no-gap": 5, "partner": 1, "unexplained": 16, "other": 2}
+        "no-gap": 6, "partner": 2, "unexplained": 20, "other": 4}
