@@ -1145,6 +1145,39 @@ def test_the_67000_runs_second_half_in_two_passes_gives_its_report():
     assert one["unexplained_out_of_library"] == pytest.approx(9 / 13)
 
 
+#: the 67000 run's second-plant single misses (docs/gap_validation.md, *The 67000 run's
+#: second half*)
+SECOND_MISSES_67000 = (67005, 67010, 67026, 67033, 67040, 67042, 67047, 67065)
+
+
+def test_the_67000_runs_second_plant_misses_are_the_65000_runs_packages_too(
+        capsys, monkeypatch):
+    """``benchmarks/rediagnose_at_commit.py`` on its committed log: the eight single
+    misses of the 67000 run's second-plant half, diagnosed again by the package of the
+    65000 run (``ed0d201``, the comparison's tolerances with a fitted runout inside
+    them), get the same verdicts under the same thresholds: the change the 67000 run
+    tried made none of them. Nothing runs (every trial is logged); a malformed trial or
+    an unknown commit is one argparse error."""
+    import rediagnose_at_commit as rediag
+
+    written = {}
+    monkeypatch.setattr(rediag, "write_json", lambda name, payload: written.update(payload))
+    args = ["--commit", "ed0d201", "--report", "results/bench_gap_blind_67000_af72500.json",
+            "--logged", "af72500", "--second-pass"]
+    rediag.main(args + [f"second:{s}" for s in SECOND_MISSES_67000])
+    out = capsys.readouterr().out
+    assert "diagnosing" not in out and "verdicts that differ: none" in out
+    assert [t["trial"] for t in written["trials"]] == [
+        f"second:{s}" for s in SECOND_MISSES_67000]
+    assert written["changed"] == [] and not any(
+        t["right_at_commit"] or t["right_logged"] for t in written["trials"])
+    assert written["commit"].startswith("ed0d201")
+    for bad in (args + ["second:x"], ["--commit", "nosuchcommit"] + args[2:] + ["second:67005"]):
+        with pytest.raises(SystemExit) as exc:
+            rediag.main(bad)
+        assert exc.value.code == 2
+
+
 def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_figures():
     """``benchmarks/pooled_package_rule.py`` (docs/gap_validation.md): 51000-61000, the
     65000 run and the 67000 run, each decided by its frozen thresholds with the shrink
