@@ -170,10 +170,9 @@ def append_log(path, record):
         f.write(json.dumps(record, default=float) + "\n")
 
 
-def rerun_trials(ap, items, families, log, run):
-    """Yield the records of ``FAMILY:SEED`` ``items`` in turn, each from the JSON-lines
-    ``log`` if it is there, else ``run(family, seed)``'s, appended to it first: a re-run
-    of logged trials that resumes. A malformed item is ``ap``'s error before any run."""
+def trial_keys(ap, items, families):
+    """``FAMILY:SEED`` ``items`` as ``(family, seed)`` pairs; a malformed item is ``ap``'s
+    error."""
     keys = []
     for item in items:
         family, sep, seed = item.partition(":")
@@ -181,6 +180,14 @@ def rerun_trials(ap, items, families, log, run):
             ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(families)}; "
                      f"got {item!r}")
         keys.append((family, int(seed)))
+    return keys
+
+
+def rerun_trials(ap, items, families, log, run):
+    """Yield the records of ``FAMILY:SEED`` ``items`` in turn, each from the JSON-lines
+    ``log`` if it is there, else ``run(family, seed)``'s, appended to it first: a re-run
+    of logged trials that resumes. A malformed item is ``ap``'s error before any run."""
+    keys = trial_keys(ap, items, families)
     done = {(r["family"], r["seed"]): r for r in read_log(log)}
     for key in keys:
         if key not in done:

@@ -40,6 +40,7 @@ from _common import (  # noqa: E402
     logged_eval_trial,
     read_log,
     table,
+    trial_keys,
     write_json,
 )
 from bench_gap_blind import FAMILIES, right, truth_label, verdict  # noqa: E402
@@ -98,18 +99,6 @@ def diagnose_at(tree: Path, kind, seed: int, family: str, second_pass: bool) -> 
     return json.loads(lines[-1][len("RECORD "):])
 
 
-def parse_trials(ap, items):
-    """``FAMILY:SEED`` items as ``(family, seed)``; a malformed one is ``ap``'s error."""
-    out = []
-    for item in items:
-        family, sep, seed = item.partition(":")
-        if not sep or not seed.isdigit() or family not in FAMILIES:
-            ap.error(f"a trial is FAMILY:SEED with FAMILY one of {', '.join(FAMILIES)}; "
-                     f"got {item!r}")
-        out.append((family, int(seed)))
-    return out
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("trials", nargs="+", metavar="FAMILY:SEED")
@@ -124,7 +113,7 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1, help="trials run at once")
     args = ap.parse_args(argv)
     frozen = frozen_thresholds(args.report, ap)
-    keys = parse_trials(ap, args.trials)
+    keys = trial_keys(ap, args.trials, FAMILIES)
     gaps_path = RESULTS / "gap_blind_member_gaps.json"
     member_gaps = json.loads(gaps_path.read_text()) if gaps_path.exists() else {}
     logged = {}
@@ -152,7 +141,9 @@ def main(argv=None):
                    "second_pass": args.second_pass}
             with lock:
                 append_log(LOG, rec)
-                print(f"  {family}:{seed} done ({rec['seconds']:.0f} s)", flush=True)
+                print(f"  {family}:{seed} " + (f"skipped ({rec['skipped']})" if "skipped" in rec
+                                               else f"done ({rec['seconds']:.0f} s)"),
+                      flush=True)
             return key, rec
 
         print(f"diagnosing {len(todo)} trial(s) at {commit[:7]} ({tree})", flush=True)
@@ -165,14 +156,18 @@ def main(argv=None):
         before = logged[key]
         at = {**done[key], **({"member_gap": before["member_gap"]}
                               if "member_gap" in before else {})}
+        # the commit's plant may fail where the logged run's did not (its integrator)
+        skipped = "skipped" in at
         row = {"trial": f"{key[0]}:{key[1]}", "truth": truth_label(before, frozen),
-               "logged": verdict(before, frozen)[0], "at_commit": verdict(at, frozen)[0],
-               "right_logged": right(before, frozen), "right_at_commit": right(at, frozen),
-               "e0_logged": before["e0"], "e0_at_commit": at["e0"]}
+               "logged": verdict(before, frozen)[0],
+               "at_commit": "skipped" if skipped else verdict(at, frozen)[0],
+               "right_logged": right(before, frozen),
+               "right_at_commit": not skipped and right(at, frozen),
+               "e0_logged": before["e0"], "e0_at_commit": None if skipped else at["e0"]}
         out.append(row)
         rows.append([row["trial"], json.dumps(row["truth"]), json.dumps(row["logged"]),
                      json.dumps(row["at_commit"]), f"{row['e0_logged']:.2f}",
-                     f"{row['e0_at_commit']:.2f}"])
+                     "-" if skipped else f"{row['e0_at_commit']:.2f}"])
     table(rows, ["trial", "truth", f"verdict at {args.logged}", f"verdict at {commit[:7]}",
                  "e0 logged", "e0 at commit"])
     changed = [r["trial"] for r in out if r["logged"] != r["at_commit"]]
