@@ -264,20 +264,34 @@ def member_gaps(kind, seed, family):
     return out
 
 
+#: each pair trial's :func:`member_gaps`, keyed by :func:`member_gap_key`
+MEMBER_GAPS = RESULTS / "gap_blind_member_gaps.json"
+
+
+def member_gap_key(rec):
+    """A logged trial's key in :data:`MEMBER_GAPS`: its family, seed and code (a
+    trial's members are only as visible as the plant and package that drew it)."""
+    return f"{rec['family']}:{rec['seed']}:{rec['code']}"
+
+
+def read_member_gaps():
+    """The cached :func:`member_gaps` (empty before any was computed)."""
+    return json.loads(MEMBER_GAPS.read_text()) if MEMBER_GAPS.exists() else {}
+
+
 def with_member_gaps(recs):
     """The pair trials' records with their ``member_gap`` (:func:`member_gaps`),
-    computed once per trial and code and kept in ``gap_blind_member_gaps.json``."""
-    path = RESULTS / "gap_blind_member_gaps.json"
-    cache = json.loads(path.read_text()) if path.exists() else {}
+    computed once per trial and code and kept in :data:`MEMBER_GAPS`."""
+    cache = read_member_gaps()
     out = []
     for r in recs:
         if isinstance(r["kind"], list) and "member_gap" not in r:
-            key = f"{r['family']}:{r['seed']}:{r['code']}"
+            key = member_gap_key(r)
             if key not in cache:
                 print(f"  {r['family']} seed {r['seed']} {r['kind']}: each member's "
                       "visibility beside the other", flush=True)
                 cache[key] = member_gaps(r["kind"], r["seed"], r["family"])
-                path.write_text(json.dumps(cache, indent=1))
+                MEMBER_GAPS.write_text(json.dumps(cache, indent=1))
             r = {**r, "member_gap": cache[key]}
         out.append(r)
     return out

@@ -43,7 +43,14 @@ from _common import (  # noqa: E402
     trial_keys,
     write_json,
 )
-from bench_gap_blind import FAMILIES, right, truth_label, verdict  # noqa: E402
+from bench_gap_blind import (  # noqa: E402
+    FAMILIES,
+    member_gap_key,
+    read_member_gaps,
+    right,
+    truth_label,
+    verdict,
+)
 from rescore_gap_blind import frozen_thresholds  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -114,14 +121,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
     frozen = frozen_thresholds(args.report, ap)
     keys = trial_keys(ap, args.trials, FAMILIES)
-    gaps_path = RESULTS / "gap_blind_member_gaps.json"
-    member_gaps = json.loads(gaps_path.read_text()) if gaps_path.exists() else {}
+    member_gaps = read_member_gaps()
     logged = {}
     for family, seed in keys:
         rec = logged_eval_trial(family, seed, [args.logged])
         if rec is None:
             ap.error(f"no logged trial {family}:{seed} of {args.logged}")
-        gaps = member_gaps.get(f"{family}:{seed}:{rec['code']}")
+        gaps = member_gaps.get(member_gap_key(rec))
         logged[family, seed] = {**rec, **({"member_gap": gaps} if gaps else {})}
     sha = resolve(args.commit)
     commit = sha or args.commit

@@ -54,6 +54,8 @@ from _common import RESULTS, setting_overrides, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     EARLIER_SEARCH_PAIR_TRIGGER,
     detectable,
+    member_gap_key,
+    read_member_gaps,
     right,
     score,
     secondary_rules,
@@ -174,8 +176,7 @@ def frozen_thresholds(path, ap):
 def load(families, commit):
     """Each family's logged evaluation trials of ``commit`` (one per seed, the last
     logged), with each pair member's visibility from the member-gap cache."""
-    cache_path = RESULTS / "gap_blind_member_gaps.json"
-    cache = json.loads(cache_path.read_text()) if cache_path.exists() else {}
+    cache = read_member_gaps()
     out = {}
     for fam in families:
         by_seed = {}
@@ -187,7 +188,7 @@ def load(families, commit):
                     by_seed[r["seed"]] = r
         recs = []
         for r in by_seed.values():
-            key = f"{r['family']}:{r['seed']}:{r['code']}"
+            key = member_gap_key(r)
             if isinstance(r["kind"], list) and key in cache:
                 r = {**r, "member_gap": cache[key]}
             recs.append(r)
