@@ -55,7 +55,8 @@ from sknarx.gap import DiagnosisSettings  # noqa: E402
 #: runs after the 61000 run, measured in two passes, searched as the package searches
 #: now (pairs from 0.1)
 LATER_RUNS = (PackageRun("results/bench_gap_blind_65000_ed0d201.json", "ed0d201"),
-              PackageRun("results/bench_gap_blind_67000_af72500.json", "af72500"))
+              PackageRun("results/bench_gap_blind_67000_af72500.json", "af72500"),
+              PackageRun("results/bench_gap_blind_69000_0ab344c.json", "0ab344c"))
 #: the rates reported, with their labels
 RATES = {"top1": "top-1", "pairs_in_top2": "pairs in top two", "false_alarm": "false alarms",
          "unexplained_out_of_library": "out-of-library `unexplained`",
