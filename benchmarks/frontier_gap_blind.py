@@ -40,7 +40,13 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table, write_json  # noqa: E402
 from bench_gap_blind import TARGETS, score  # noqa: E402
-from rescore_gap_blind import frozen_thresholds, intervals, load, without_readings  # noqa: E402
+from rescore_gap_blind import (  # noqa: E402
+    frozen_thresholds,
+    intervals,
+    load,
+    reported_families,
+    without_readings,
+)
 
 
 @dataclass(frozen=True)
@@ -81,12 +87,13 @@ MOVED = ("top1", "false_alarm", "unexplained_out_of_library")
 
 
 def decided_runs(runs=RUNS, families=FAMILIES):
-    """Each run of ``runs`` as ``(its package rule, its logged trials by family)``."""
+    """Each run of ``runs`` as ``(its package rule, its logged trials by family)``, each
+    run's trials of the families its report scored."""
     out = []
     for run in runs:
-        rule = replace(frozen_thresholds(run.report, argparse.ArgumentParser()),
-                       **dict(run.what_if))
-        evals = load(list(families), run.commits)
+        ap = argparse.ArgumentParser()
+        rule = replace(frozen_thresholds(run.report, ap), **dict(run.what_if))
+        evals = load(reported_families(run.report, families, ap), run.commits)
         if run.without_readings:
             evals = {fam: [without_readings(r) for r in recs] for fam, recs in evals.items()}
         out.append((rule, evals))

@@ -138,7 +138,7 @@ def intervals(sc):
     return out
 
 
-def _report(path, ap):
+def read_report(path, ap):
     """A ``bench_gap_blind`` JSON report (``path`` relative to ``benchmarks/`` unless
     absolute); an unreadable one, or one without thresholds, is ``ap``'s error line."""
     report = Path(path)
@@ -153,9 +153,16 @@ def _report(path, ap):
     return doc
 
 
+def reported_families(path, families, ap):
+    """The families of ``families`` the report at ``path`` scored: a run's logs are
+    decided only where its report says the run was complete (a run half-way through
+    may have logged some of the other family's trials already)."""
+    return [fam for fam in families if fam in read_report(path, ap).get("families", {})]
+
+
 def frozen_thresholds(path, ap):
-    """The frozen thresholds of a ``bench_gap_blind`` JSON report (see :func:`_report`)."""
-    thresholds = _report(path, ap)["thresholds"]
+    """The frozen thresholds of a ``bench_gap_blind`` JSON report (see :func:`read_report`)."""
+    thresholds = read_report(path, ap)["thresholds"]
     known = {f.name for f in fields(DiagnosisSettings)}
     # a report written before the breadth waiver existed was decided without it, one
     # written before the per-order floors without them, and one written before the
@@ -272,13 +279,13 @@ def main(argv=None):
             ap.error(f"--what-if {name}: {value!r} is not a number (None for "
                      f"{', '.join(NULLABLE)}, True or False for {' and '.join(SWITCHES)}, "
                      "three comma-separated numbers for order_floors_z2)")
-    searched = _report(args.report, ap).get("search_pair_trigger",
+    searched = read_report(args.report, ap).get("search_pair_trigger",
                                             EARLIER_SEARCH_PAIR_TRIGGER)
     if changes.get("pair_trigger", searched) < searched:
         ap.error(f"--what-if pair_trigger below {searched} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
     other = replace(frozen, **changes)
-    evals = load(args.families.split(","), args.commit)
+    evals = load(reported_families(args.report, args.families.split(","), ap), args.commit)
     if not any(evals.values()):
         ap.error(f"no logged evaluation trials of commit {args.commit!r} in {RESULTS}")
     rows, changed, counted = [], [], []
@@ -298,7 +305,7 @@ def main(argv=None):
             if a != b:
                 changed.append([fam, r["seed"], json.dumps(truth_label(r, frozen)),
                                 json.dumps(a), json.dumps(b)])
-    floor = _report(args.report, ap).get("noise_floor", {})
+    floor = read_report(args.report, ap).get("noise_floor", {})
     secondary = secondary_rules(floor.get("null_e0_median"))
     for fam, recs in evals.items():
         for name, rule in secondary.items():

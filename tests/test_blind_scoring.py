@@ -1214,6 +1214,22 @@ def test_the_67000_runs_second_plant_misses_are_the_65000_runs_packages_too(
         assert exc.value.code == 2
 
 
+def test_a_run_is_decided_only_on_the_families_its_report_scored(tmp_path):
+    """A run half-way through (one family's report written, the other's trials being
+    logged) is pooled and rescored on the family its report scored only: the other's
+    logged trials wait for its report."""
+    import argparse
+
+    import rescore_gap_blind as rescore
+
+    half = tmp_path / "half.json"
+    half.write_text(json.dumps({"thresholds": {}, "families": {"ross": {}}}))
+    ap = argparse.ArgumentParser()
+    assert rescore.reported_families(str(half), ["ross", "second"], ap) == ["ross"]
+    half.write_text(json.dumps({"thresholds": {}}))
+    assert rescore.reported_families(str(half), ["ross", "second"], ap) == []
+
+
 def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_figures():
     """``benchmarks/pooled_package_rule.py`` (docs/gap_validation.md): 51000-61000, the
     65000 and 67000 runs and the 69000 run's ROSS half, each decided by its frozen
