@@ -279,6 +279,15 @@ def read_member_gaps():
     return json.loads(MEMBER_GAPS.read_text()) if MEMBER_GAPS.exists() else {}
 
 
+def with_cached_member_gap(rec, cache):
+    """``rec`` with its ``member_gap`` from ``cache`` (:func:`read_member_gaps`) where a
+    pair trial's is there; otherwise ``rec`` as it is."""
+    key = member_gap_key(rec)
+    if isinstance(rec["kind"], list) and key in cache:
+        return {**rec, "member_gap": cache[key]}
+    return rec
+
+
 def with_member_gaps(recs):
     """The pair trials' records with their ``member_gap`` (:func:`member_gaps`),
     computed once per trial and code and kept in :data:`MEMBER_GAPS`."""

@@ -45,11 +45,11 @@ from _common import (  # noqa: E402
 )
 from bench_gap_blind import (  # noqa: E402
     FAMILIES,
-    member_gap_key,
     read_member_gaps,
     right,
     truth_label,
     verdict,
+    with_cached_member_gap,
 )
 from rescore_gap_blind import frozen_thresholds  # noqa: E402
 
@@ -127,8 +127,7 @@ def main(argv=None):
         rec = logged_eval_trial(family, seed, [args.logged])
         if rec is None:
             ap.error(f"no logged trial {family}:{seed} of {args.logged}")
-        gaps = member_gaps.get(member_gap_key(rec))
-        logged[family, seed] = {**rec, **({"member_gap": gaps} if gaps else {})}
+        logged[family, seed] = with_cached_member_gap(rec, member_gaps)
     sha = resolve(args.commit)
     commit = sha or args.commit
     done = {(r["family"], r["seed"]): r for r in read_log(LOG)

@@ -54,13 +54,13 @@ from _common import RESULTS, setting_overrides, table  # noqa: E402
 from bench_gap_blind import (  # noqa: E402
     EARLIER_SEARCH_PAIR_TRIGGER,
     detectable,
-    member_gap_key,
     read_member_gaps,
     right,
     score,
     secondary_rules,
     truth_label,
     verdict,
+    with_cached_member_gap,
 )
 
 from sknarx.gap import DiagnosisSettings  # noqa: E402
@@ -193,12 +193,7 @@ def load(families, commit):
                 if (any(str(r.get("commit", "")).startswith(c) for c in commit.split(","))
                         and "ranking" in r):
                     by_seed[r["seed"]] = r
-        recs = []
-        for r in by_seed.values():
-            key = member_gap_key(r)
-            if isinstance(r["kind"], list) and key in cache:
-                r = {**r, "member_gap": cache[key]}
-            recs.append(r)
+        recs = [with_cached_member_gap(r, cache) for r in by_seed.values()]
         out[fam] = sorted(recs, key=lambda r: r["seed"])
     return out
 
