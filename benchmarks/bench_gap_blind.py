@@ -565,6 +565,7 @@ def score(recs, s, rule=None):
         "top1_separable": rate(sep_singles, lambda r: right(r, s, rule)),
         "unexplained_out_of_library_separable": rate(
             sep_out, lambda r: verdict(r, s, rule)[0] == "unexplained"),
+        "n_separable_singles": len(sep_singles),
         "n_singles_followed_by_update": len(singles) - len(sep_singles),
         "n_out_of_library_followed_by_update": len(out) - len(sep_out),
         "unexplained_out_of_library_beyond_library": rate(
