@@ -573,6 +573,7 @@ def score(recs, s, rule=None):
         "n_out_of_library_beyond_library": len(beyond_out),
         "pairs_in_top2_separable": rate(sep_pairs, lambda r: set(r["kind"]) <= top2_names(r)),
         "pairs_verdict_separable": rate(sep_pairs, lambda r: right(r, s, rule)),
+        "n_separable_pairs": len(sep_pairs),
         "n_pairs_with_a_member_followed": len(pairs) - len(sep_pairs),
         "top1_right_place": rate(with_place, lambda r: placed(r, s, rule)),
         "n_right_with_a_place": len(with_place),

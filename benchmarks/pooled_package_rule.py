@@ -10,8 +10,8 @@ verdict rule of now (``DiagnosisSettings.noise_per_feature``: the share removed 
 effect-free noise). ``pool_gap_blind.py`` pools the reports as each run's rule wrote them
 (the plain shrink before 2026-12-05, one pass before 61000); this decides them all by
 one rule. Per family: each rate pooled with its Wilson 95 % interval (with, beside the
-targets' rates, top-1 on the singles still visible after the nominal update), and the
-misses sorted by kind --
+targets' rates, top-1 and pairs in the top two on the trials whose effects are still
+visible after the nominal update), and the misses sorted by kind --
 
 * a detectable single: named with a partner (the right effect and one more), ``no-gap``
   (the nominal update followed it), ``unexplained``, or another effect named;
@@ -62,7 +62,8 @@ LATER_RUNS = (PackageRun("results/bench_gap_blind_65000_ed0d201.json", "ed0d201"
 RATES = {"top1": "top-1", "pairs_in_top2": "pairs in top two", "false_alarm": "false alarms",
          "unexplained_out_of_library": "out-of-library `unexplained`",
          "names_right": "names right",
-         "top1_separable": "top-1, singles visible after the update"}
+         "top1_separable": "top-1, singles visible after the update",
+         "pairs_in_top2_separable": "pairs in top two, members visible after the update"}
 
 
 def single_miss(rec, rule):

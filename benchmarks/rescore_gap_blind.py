@@ -89,9 +89,11 @@ COUNTS = {"top1": "n_detectable_singles", "pairs_in_top2": "n_detectable_pairs",
           # secondary: of every verdict that names an effect, those whose every named
           # effect the trial holds (a pair named by one member counts)
           "names_present": "n_named",
-          # secondary: top-1 on the singles still visible after the nominal update
-          # (bench_gap_blind.separable): where top-1's misses come from, never the target
-          "top1_separable": "n_separable_singles"}
+          # secondary: top-1 on the singles, and pairs in the top two on the pairs with
+          # each member, still visible after the nominal update (bench_gap_blind.separable):
+          # where the misses come from, never the targets
+          "top1_separable": "n_separable_singles",
+          "pairs_in_top2_separable": "n_separable_pairs"}
 COLUMNS = ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm",
            "unexplained_out_of_library", "shrink_vs_oracle_median")
 

@@ -1274,7 +1274,8 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
     90, out-of-library 114/123; the second plant: 245/284, 68/81, 0/81, 112/116; ROSS's
     single misses are mostly followed by the update (14), `unexplained` (10) or named
     with a partner (7), the second plant's `unexplained` (21, its loose joints most). On
-    the singles still visible after the update top-1 is 203/222 and 232/261."""
+    the singles still visible after the update top-1 is 203/222 and 232/261, on the pairs
+    with both members visible 49/53 and 53/56 in the top two."""
     import pooled_package_rule as ppr
 
     decided = ppr.decided_by_package_rule()
@@ -1285,8 +1286,10 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
     assert [got["second"][k] for k in ("top1", "pairs_in_top2", "false_alarm",
                                        "unexplained_out_of_library")] == [
         [245, 284], [68, 81], [0, 81], [112, 116]]
-    # top-1 on the singles the update left visible, beside the target's (never instead)
+    # the same on the trials the update left visible, beside the targets' (never instead)
     assert [got[fam]["top1_separable"] for fam in ("ross", "second")] == [[203, 222], [232, 261]]
+    assert [got[fam]["pairs_in_top2_separable"] for fam in ("ross", "second")] == [
+        [49, 53], [53, 56]]
     found = ppr.misses(decided)
     assert {k: len(v) for k, v in found["ross"]["singles"].items()} == {
         "no-gap": 14, "partner": 7, "unexplained": 10, "other": 2}
