@@ -1049,6 +1049,19 @@ def _pairs_missed_in_top2(recs, s):
             and not set(r["kind"]) <= blind.top2_names(r)]
 
 
+def _only_the_bows_passes_differ(recs, s, out_of_library_one_pass):
+    """A run measured in two passes: only the thermal bows' passes differ under ``s``,
+    and on the first pass alone the out-of-library rate is ``out_of_library_one_pass``.
+    Returns the bows' seeds."""
+    import rescore_gap_blind as rescore
+
+    bows = {r["seed"] for r in recs if r["kind"] == "thermal-bow"}
+    assert {r["seed"] for r in recs if blind.passes_differ(r, s)} == bows
+    one = blind.score([rescore.first_pass_only(r) for r in recs], s)
+    assert one["unexplained_out_of_library"] == pytest.approx(out_of_library_one_pass)
+    return bows
+
+
 def test_the_65000_runs_ross_half_in_two_passes_gives_its_report():
     """The 65000 run's ROSS half (docs/gap_validation.md, *The 65000 run's ROSS half*):
     the package with partners searched from 0.1, two passes, 68 trials of which ROSS's
@@ -1075,8 +1088,6 @@ def test_the_65000_runs_second_half_in_two_passes_gives_its_report():
     (two loose joints `unexplained`, a crack named a rub), pairs in the top two 7/9, every
     out-of-library draw `unexplained` with two passes and 9/13 on the first alone; only
     the relaxing bows' passes differ."""
-    import rescore_gap_blind as rescore
-
     _, recs, package = _the_65000_run("second")
     assert len(recs) == 68
     sc = blind.score(recs, package)
@@ -1085,10 +1096,7 @@ def test_the_65000_runs_second_half_in_two_passes_gives_its_report():
     assert sc["n_out_of_library"] == 13 and sc["shrink_vs_oracle_median"] >= 0.9
     assert _single_misses(recs, package) == {
         65010: "unexplained", 65058: "unexplained", 65040: "rub"}
-    assert {r["seed"] for r in recs if blind.passes_differ(r, package)} == {
-        r["seed"] for r in recs if r["kind"] == "thermal-bow"} == {65007, 65023, 65039, 65055}
-    one = blind.score([rescore.first_pass_only(r) for r in recs], package)
-    assert one["unexplained_out_of_library"] == pytest.approx(9 / 13)
+    assert _only_the_bows_passes_differ(recs, package, 9 / 13) == {65007, 65023, 65039, 65055}
 
 
 def test_the_67000_runs_ross_half_in_two_passes_gives_its_report():
@@ -1099,8 +1107,6 @@ def test_the_67000_runs_ross_half_in_two_passes_gives_its_report():
     its anisotropy followed by the update), no false alarm, out-of-library 11/13 (two
     cage faults under the floor) and 8/13 on the first pass alone; only the bows'
     passes differ."""
-    import rescore_gap_blind as rescore
-
     ran, evals = _logged_run("results/bench_gap_blind_67000_af72500.json", "af72500")
     _assert_decided_as(ran, DiagnosisSettings(), but=())
     recs = evals["ross"]
@@ -1113,10 +1119,7 @@ def test_the_67000_runs_ross_half_in_two_passes_gives_its_report():
         67001: "unexplained", 67008: ["crack", "misalignment"], 67053: "no-gap"}
     missed = _pairs_missed_in_top2(recs, ran)
     assert missed == [67066]
-    assert {r["seed"] for r in recs if blind.passes_differ(r, ran)} == {
-        r["seed"] for r in recs if r["kind"] == "thermal-bow"}
-    one = blind.score([rescore.first_pass_only(r) for r in recs], ran)
-    assert one["unexplained_out_of_library"] == pytest.approx(8 / 13)
+    _only_the_bows_passes_differ(recs, ran, 8 / 13)
 
 
 def test_the_67000_runs_second_half_in_two_passes_gives_its_report():
@@ -1127,8 +1130,6 @@ def test_the_67000_runs_second_half_in_two_passes_gives_its_report():
     followed by the update), pairs in the top two 8/9 (anisotropy + runout 67038 missed),
     no false alarm, every out-of-library draw `unexplained` with two passes and 9/13 on
     the first alone; only the bows' passes differ."""
-    import rescore_gap_blind as rescore
-
     ran, evals = _logged_run("results/bench_gap_blind_67000_af72500.json", "af72500")
     recs = evals["second"]
     assert len(recs) == 68 and all("passes" in r for r in recs)
@@ -1142,10 +1143,7 @@ def test_the_67000_runs_second_half_in_two_passes_gives_its_report():
         67065: "unexplained"}
     missed = _pairs_missed_in_top2(recs, ran)
     assert missed == [67038]
-    assert {r["seed"] for r in recs if blind.passes_differ(r, ran)} == {
-        r["seed"] for r in recs if r["kind"] == "thermal-bow"} == {67007, 67023, 67039, 67055}
-    one = blind.score([rescore.first_pass_only(r) for r in recs], ran)
-    assert one["unexplained_out_of_library"] == pytest.approx(9 / 13)
+    assert _only_the_bows_passes_differ(recs, ran, 9 / 13) == {67007, 67023, 67039, 67055}
 
 
 def test_the_69000_runs_ross_half_in_two_passes_gives_its_report():
@@ -1156,8 +1154,6 @@ def test_the_69000_runs_ross_half_in_two_passes_gives_its_report():
     `unexplained`, a crack named a rub; pairs in the top two 6/8; no false alarm;
     every out-of-library draw `unexplained` with two passes and 8/13 on the first
     alone; only the bows' passes differ."""
-    import rescore_gap_blind as rescore
-
     ran, evals = _logged_run("results/bench_gap_blind_69000_0ab344c.json", "0ab344c")
     _assert_decided_as(ran, DiagnosisSettings(), but=())
     recs = evals["ross"]
@@ -1175,11 +1171,7 @@ def test_the_69000_runs_ross_half_in_two_passes_gives_its_report():
     followed = {r["seed"] for r in recs if r["seed"] in misses and not blind.separable(r, ran)}
     assert followed == {69012, 69027, 69042, 69057}
     assert _pairs_missed_in_top2(recs, ran) == [69021, 69062]
-    assert {r["seed"] for r in recs if blind.passes_differ(r, ran)} == {
-        r["seed"] for r in recs if r["kind"] == "thermal-bow"}
-    one = blind.score([rescore.first_pass_only(r) for r in recs], ran)
-    assert one["unexplained_out_of_library"] == pytest.approx(8 / 13)
-
+    _only_the_bows_passes_differ(recs, ran, 8 / 13)
 
 
 def test_the_69000_runs_second_half_in_two_passes_gives_its_report():
@@ -1190,8 +1182,6 @@ def test_the_69000_runs_second_half_in_two_passes_gives_its_report():
     pair with both members in the top two; no false alarm; out-of-library 12/13 (a cage
     fault the update followed) and 9/13 on the first pass alone; only the bows' passes
     differ. Its ROSS half's figures are unchanged by the second half's report."""
-    import rescore_gap_blind as rescore
-
     ran, evals = _logged_run("results/bench_gap_blind_69000_0ab344c.json", "0ab344c")
     recs = evals["second"]
     assert len(recs) == 68 and all("passes" in r for r in recs)
@@ -1212,10 +1202,7 @@ def test_the_69000_runs_second_half_in_two_passes_gives_its_report():
     missed_out = [r["seed"] for r in recs if not r["in_library"] and blind.visible(r, ran)
                   and blind.verdict(r, ran)[0] != "unexplained"]
     assert missed_out == [69043]
-    assert {r["seed"] for r in recs if blind.passes_differ(r, ran)} == {
-        r["seed"] for r in recs if r["kind"] == "thermal-bow"} == {69007, 69023, 69039, 69055}
-    one = blind.score([rescore.first_pass_only(r) for r in recs], ran)
-    assert one["unexplained_out_of_library"] == pytest.approx(9 / 13)
+    assert _only_the_bows_passes_differ(recs, ran, 9 / 13) == {69007, 69023, 69039, 69055}
     assert blind.score(evals["ross"], ran)["top1"] == pytest.approx(21 / 30)
 
 #: the 67000 run's second-plant single misses (docs/gap_validation.md, *The 67000 run's
