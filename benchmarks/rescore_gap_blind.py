@@ -280,7 +280,7 @@ def main(argv=None):
                      f"{', '.join(NULLABLE)}, True or False for {' and '.join(SWITCHES)}, "
                      "three comma-separated numbers for order_floors_z2)")
     searched = read_report(args.report, ap).get("search_pair_trigger",
-                                            EARLIER_SEARCH_PAIR_TRIGGER)
+                                                EARLIER_SEARCH_PAIR_TRIGGER)
     if changes.get("pair_trigger", searched) < searched:
         ap.error(f"--what-if pair_trigger below {searched} (the blind run's own "
                  "search trigger): the log has no pairs to decide with")
