@@ -1282,3 +1282,29 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
         "no-gap": 14, "partner": 7, "unexplained": 10, "other": 2}
     assert {k: len(v) for k, v in found["second"]["singles"].items()} == {
         "no-gap": 9, "partner": 5, "unexplained": 21, "other": 4}
+
+
+def test_the_anisotropy_split_names_few_followed_pedestals_and_its_own_uncertainty_none():
+    """``benchmarks/anisotropy_split_gap_blind.py`` (docs/gap_validation.md, *The
+    anisotropy's fitted split on the no-gap sweeps*): on the pooled runs' ``no-gap``
+    sweeps the fitted split's z against its own standard errors exceeds 3 on 11 and 22
+    effect-free trials, so it cannot tell followed pedestals from them; the stiffness
+    ratio is at most 3.8 and 2.9 effect-free, and naming the anisotropy above 3.8 names
+    4 and 6 followed pedestals (each on its soft axis) and 6 and 5 other trials wrongly:
+    top-1 220/249 and 251/284, under the target either way."""
+    import anisotropy_split_gap_blind as split
+    import pooled_package_rule as ppr
+
+    decided = ppr.decided_by_package_rule()
+    rows = split.no_gap_splits(decided)
+    got = split.summary(rows, ["ross", "second"])
+    assert [got[fam]["effect-free"]["n_z_over_3"] for fam in ("ross", "second")] == [11, 22]
+    assert [round(got[fam]["effect-free"]["ratio_max"], 1)
+            for fam in ("ross", "second")] == [3.8, 2.9]
+    assert [got[fam]["followed anisotropy"]["n"] for fam in ("ross", "second")] == [10, 6]
+    bar = max(r["ratio"] for r in rows if r["class"] == "effect-free")
+    found = split.what_if(decided, rows, bar)
+    assert [len(found[fam]["gained"]) for fam in ("ross", "second")] == [4, 6]
+    assert [found[fam]["wrong_axis"] for fam in ("ross", "second")] == [[], []]
+    assert [sum(found[fam]["others_named"].values()) for fam in ("ross", "second")] == [6, 5]
+    assert [found[fam]["top1_with"] for fam in ("ross", "second")] == [[220, 249], [251, 284]]
