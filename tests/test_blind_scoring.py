@@ -1308,3 +1308,8 @@ def test_the_anisotropy_split_names_few_followed_pedestals_and_its_own_uncertain
     assert [found[fam]["wrong_axis"] for fam in ("ross", "second")] == [[], []]
     assert [sum(found[fam]["others_named"].values()) for fam in ("ross", "second")] == [6, 5]
     assert [found[fam]["top1_with"] for fam in ("ross", "second")] == [[220, 249], [251, 284]]
+    # and for scale, the verdict rule naming no pair at all (docs: *And the pair verdicts*)
+    from frontier_gap_blind import pooled
+
+    no_pairs = pooled(decided, {"pair_gain": 1.0})
+    assert [no_pairs[fam]["top1"] for fam in ("ross", "second")] == [[221, 249], [250, 284]]
