@@ -19,11 +19,13 @@ visible after the nominal update), and the misses sorted by kind --
   or one it left visible.
 
 Analysis of finished runs; the rule was chosen before the runs after 61000 and on the
-ones before (docs/gap_validation.md), so only those later runs are its fresh-seed score.
+ones before (docs/gap_validation.md), so only those later runs are its fresh-seed score:
+``--later-only`` pools them alone (writes ``results/gap_blind_pooled_package_rule_later.json``).
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections import Counter
 from dataclasses import replace
@@ -109,7 +111,12 @@ def decided_by_package_rule(runs=PACKAGE_RULE_RUNS):
 
 
 def main(argv=None):
-    runs = PACKAGE_RULE_RUNS
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--later-only", action="store_true",
+                    help="pool only the runs after 61000 (LATER_RUNS), the rule's "
+                         "fresh-seed score")
+    args = ap.parse_args(argv)
+    runs = LATER_RUNS if args.later_only else PACKAGE_RULE_RUNS
     print(f"loading the logs of {len(runs)} runs", file=sys.stderr)
     noise = DiagnosisSettings().noise_per_feature
     decided = decided_by_package_rule(runs)
@@ -127,8 +134,9 @@ def main(argv=None):
     table([[fam, what, kind, len(items)] for fam, d in found.items()
            for what in ("singles", "pairs") for kind, items in sorted(d[what].items())],
           ["family", "detectable", "miss", "trials"])
-    write_json("gap_blind_pooled_package_rule", {
-        "command": "python benchmarks/pooled_package_rule.py",
+    write_json("gap_blind_pooled_package_rule" + ("_later" if args.later_only else ""), {
+        "command": "python benchmarks/pooled_package_rule.py"
+                   + (" --later-only" if args.later_only else ""),
         "runs": [run.report for run in runs], "noise_per_feature": noise,
         "families": {fam: {"rates": {rate: {"k": got[fam][rate][0], "n": got[fam][rate][1],
                                             "interval": list(wilson(*got[fam][rate]))}
