@@ -37,7 +37,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from _common import table, write_json  # noqa: E402
-from bench_gap_blind import detectable, right, truth_label, verdict, visible  # noqa: E402
+from bench_gap_blind import detectable, truth_label, verdict, visible  # noqa: E402
+from frontier_gap_blind import pooled  # noqa: E402
 from pooled_package_rule import decided_by_package_rule  # noqa: E402
 from rescore_gap_blind import wilson  # noqa: E402
 
@@ -105,17 +106,13 @@ def what_if(decided, rows, bar):
     """Naming the anisotropy on each ``no-gap`` trial whose ratio exceeds ``bar``: per
     family the followed anisotropies named on their soft axis (``gained``), on the other
     axis, the other trials named (by class), and top-1 ``[k, n]`` with and without it."""
+    top1 = {fam: rates["top1"] for fam, rates in pooled(decided).items()}
     out = {}
     for fam in sorted({r["family"] for r in rows}):
         named = [r for r in rows if r["family"] == fam and r["ratio"] > bar]
         gained = [r["seed"] for r in named if r["class"] == "followed anisotropy"
                   and r["axis"] == r["true_axis"]]
-        k = n = 0
-        for rule, evals in decided:
-            for r in evals.get(fam, []):
-                if detectable(r, rule) and isinstance(truth_label(r, rule), str):
-                    n += 1
-                    k += right(r, rule)
+        k, n = top1[fam]
         others = {}
         for r in named:
             if r["class"] != "followed anisotropy":
