@@ -1285,8 +1285,8 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
     # the runs after 61000 alone, the rule's fresh-seed score (--later-only)
     later = ppr.pooled(ppr.decided_by_package_rule(ppr.LATER_RUNS))
     assert [later[fam][k] for fam in ("ross", "second")
-            for k in ("top1", "top1_separable", "pairs_in_top2")] == [
-        [69, 85], [66, 77], [19, 24], [76, 94], [71, 84], [24, 27]]
+            for k in ("top1", "top1_separable", "pairs_in_top2", "names_right")] == [
+        [69, 85], [66, 77], [19, 24], [84, 98], [76, 94], [71, 84], [24, 27], [86, 110]]
 
 
 def test_the_anisotropy_split_names_few_followed_pedestals_and_its_own_uncertainty_none():
