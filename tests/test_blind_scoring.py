@@ -1287,6 +1287,11 @@ def test_the_runs_the_package_rule_decides_in_two_passes_pool_to_the_recorded_fi
     assert [later[fam][k] for fam in ("ross", "second")
             for k in ("top1", "top1_separable", "pairs_in_top2", "names_right")] == [
         [69, 85], [66, 77], [19, 24], [84, 98], [76, 94], [71, 84], [24, 27], [86, 110]]
+    later_misses = ppr.misses(ppr.decided_by_package_rule(ppr.LATER_RUNS))
+    assert [{k: len(v) for k, v in later_misses[fam]["singles"].items()}
+            for fam in ("ross", "second")] == [
+        {"partner": 5, "unexplained": 5, "no-gap": 5, "other": 1},
+        {"unexplained": 7, "other": 3, "partner": 4, "no-gap": 4}]
 
 
 def test_the_anisotropy_split_names_few_followed_pedestals_and_its_own_uncertainty_none():
