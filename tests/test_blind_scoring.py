@@ -1312,8 +1312,7 @@ def test_the_anisotropy_split_names_few_followed_pedestals_and_its_own_uncertain
     assert [round(got[fam]["effect-free"]["ratio_max"], 1)
             for fam in ("ross", "second")] == [3.8, 2.9]
     assert [got[fam]["followed anisotropy"]["n"] for fam in ("ross", "second")] == [10, 6]
-    bar = max(r["ratio"] for r in rows if r["class"] == "effect-free")
-    found = split.what_if(decided, rows, bar)
+    found = split.what_if(decided, rows, split.effect_free_bar(rows))
     assert [len(found[fam]["gained"]) for fam in ("ross", "second")] == [4, 6]
     assert [found[fam]["wrong_axis"] for fam in ("ross", "second")] == [[], []]
     assert [sum(found[fam]["others_named"].values()) for fam in ("ross", "second")] == [6, 5]
