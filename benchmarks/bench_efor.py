@@ -1,6 +1,7 @@
 """EFOR identification speed and memory, side by side with its references.
 
-Run: ``python benchmarks/bench_efor.py`` (writes ``benchmarks/results/bench_efor.json``).
+Run: ``python benchmarks/bench_efor.py [--summary]`` (writes
+``benchmarks/results/bench_efor.json``).
 
 1. K = 19 datasets x 81,921 samples x 84 candidates (ny = nu = 3, degree 3):
    the full fit (dictionary, common-structure selection, coefficients, speed
@@ -15,13 +16,15 @@ Run: ``python benchmarks/bench_efor.py`` (writes ``benchmarks/results/bench_efor
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tracemalloc
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import summary_flag, table, timeit, write_json  # noqa: E402, I001
+
 import numpy as np  # noqa: E402
-from _common import table, timeit, write_json  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
@@ -80,7 +83,10 @@ def sysidentpy_names(final_model):
     return names
 
 
-def main(repeat=5):
+def main(argv=None, repeat=5):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    summary_flag(ap)
+    args = ap.parse_args(argv)
     data, speeds = make_sweep()
     results = {}
     with threadpool_limits(limits=1, user_api="blas"):
@@ -154,7 +160,7 @@ def main(repeat=5):
         ["simulate 81,921 samples", f"{sim['median_s'] * 1e3:.2f} ms", "", "", "<= 20 ms"],
     ]
     table(rows, ["case", "sknarx", "reference", "ratio", "target"])
-    write_json("bench_efor", results)
+    write_json("bench_efor", results, args.summary)
     return results
 
 

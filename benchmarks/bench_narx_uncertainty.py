@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
-from _common import table, timeit, write_json  # noqa: E402
+from _common import summary_flag, table, timeit, write_json  # noqa: E402
 
 import sknarx.narx.scheduling as scheduling  # noqa: E402
 from sknarx import SpeedScheduledNarx  # noqa: E402
@@ -145,10 +145,10 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--draws", type=int, default=50)
+    summary_flag(p)
     args = p.parse_args()
-    payload = {"overhead": overhead(args.repeat), "narmax": narmax_side_by_side(args.draws),
-               "command": "python benchmarks/bench_narx_uncertainty.py"}
-    write_json("bench_narx_uncertainty", payload)
+    payload = {"overhead": overhead(args.repeat), "narmax": narmax_side_by_side(args.draws)}
+    write_json("bench_narx_uncertainty", payload, args.summary)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,7 @@
 """Simulator speed and accuracy, side by side with scipy's solve_ivp.
 
-Run: ``python benchmarks/bench_simulator.py`` (writes ``benchmarks/results/bench_simulator.json``).
-The ``solve_ivp`` case is also the benchmarks' machine-speed reference
-(``_common.machine_reference``): ``results/bench_simulator_2463907.json`` keeps its first
-timing, on the machine the cost targets were first measured on.
+Run: ``python benchmarks/bench_simulator.py [--summary]`` (writes
+``benchmarks/results/bench_simulator.json``).
 
 1. One speed (250 rad/s, 2 s from the static equilibrium, sampled at 1 kHz):
    sknarx's compiled RK4 at its default step against ``solve_ivp`` RK45
@@ -17,27 +15,22 @@ timing, on the machine the cost targets were first measured on.
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import summary_flag, table, timeit, write_json  # noqa: E402, I001
+
 import numpy as np  # noqa: E402
-from _common import (  # noqa: E402
-    REFERENCE_RUN,
-    machine_reference,
-    table,
-    time_reference,
-    timeit,
-    write_json,
-)
 
 import sknarx.rotor as R  # noqa: E402
 from sknarx.orders import order_components  # noqa: E402
 from sknarx.rotor.reference import solve_reference  # noqa: E402
 
-# the one-speed case is the benchmarks' machine-speed reference (_common.REFERENCE_RUN)
-W, T, FS = REFERENCE_RUN["omega"], REFERENCE_RUN["duration_s"], REFERENCE_RUN["fs"]
+W, T, FS = 250.0, 2.0, 1000.0  # rad/s, s, Hz
 
 
 def amplitudes(x, phi):
@@ -45,22 +38,27 @@ def amplitudes(x, phi):
     return order_components(x[half], phi[half], (1, 2))[0]
 
 
-def main(repeat=3):
+def main(argv=None, repeat=3):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    summary_flag(ap)
+    args = ap.parse_args(argv)
     sim = R.RotorBearingSimulator()
     n = int(T * FS) + 1
     phi = W * np.arange(n) / FS
     i = R.DOF_NAMES.index("xO1")
 
-    t0 = __import__("time").perf_counter()
+    t0 = time.perf_counter()
     sim.simulate(W, fs=FS, n_samples=10, settle=0.0)
-    compile_s = __import__("time").perf_counter() - t0
+    compile_s = time.perf_counter() - t0
+    sim.static_equilibrium()
 
     ref, _ = solve_reference(sim, W, T, FS, method="DOP853", rtol=1e-10)
     a_ref = amplitudes(ref[:, i], phi)
     t_ours, ours_times, run = timeit(
         lambda: sim.simulate(W, fs=FS, n_samples=n, settle=0.0), repeat)
     a_ours = amplitudes(run["xO1"].to_numpy(), run["phi"].to_numpy())
-    t_ivp, ivp_times, (y_ivp, sol) = time_reference(max(1, repeat - 1))
+    t_ivp, ivp_times, (y_ivp, sol) = timeit(
+        lambda: solve_reference(sim, W, T, FS, method="RK45", rtol=1e-6), max(1, repeat - 1))
     a_ivp = amplitudes(y_ivp[:, i], phi)
     err_ours = np.abs(a_ours / a_ref - 1)
     err_ivp = np.abs(a_ivp / a_ref - 1)
@@ -85,9 +83,7 @@ def main(repeat=3):
         lambda: sim.sweep(speeds, fs=FS, n_samples=81921, settle=2.0, n_jobs=n_jobs,
                           progress=False), repeat)
 
-    reference = machine_reference(ivp_times)
     results = {
-        "machine_reference": reference,
         "one_speed": {
             "speed_rad_s": W, "duration_s": T, "fs_hz": FS,
             "substeps": sim.substeps(FS, W),
@@ -119,13 +115,10 @@ def main(repeat=3):
              f"{matched['speedup_at_equal_accuracy']:.0f}x faster" if matched else "", ">= 50x"],
             ["paper sweep 19 x 81,921", f"{t_sweep:.2f} s", "", "", "<= 10 s"],
             ["first-call compile", f"{compile_s:.1f} s", "", "", "(not timed above)"],
-            ["machine speed (the peer against the baseline's)", "",
-             f"{reference['seconds']:.2f} s vs {reference['baseline_s']:.2f} s",
-             f"x{reference['factor']:.2f}", "(1: the baseline machine)"],
         ],
         ["case", "sknarx", "peer", "ratio", "target"],
     )
-    write_json("bench_simulator", results)
+    write_json("bench_simulator", results, args.summary)
     return results
 
 
