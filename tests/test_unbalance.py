@@ -11,13 +11,9 @@ import pytest
 import tomllib
 
 from sknarx.datasets import load_rk4_unbalance
-from sknarx.gap.unbalance import (
-    RigInfluenceModel,
-    UnbalanceModel,
-    influence_from_trial_runs,
-    load_campaign,
-    scores,
-)
+from sknarx.unbalance import RigInfluenceModel, UnbalanceModel, load_campaign
+from sknarx.unbalance.campaign import influence_from_trial_runs
+from sknarx.unbalance.model import scores
 
 ROOT = Path(__file__).resolve().parents[1]
 ROTOR = ROOT / "examples" / "rk4" / "rotor.toml"

@@ -29,109 +29,19 @@ import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import pandas as pd
 from scipy.optimize import least_squares, minimize
 
 from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import RPM
+from .campaign import GMM_KGM, MIL_M, Campaign
 
-__all__ = ["Campaign", "load_campaign", "RigInfluenceModel", "UnbalanceModel",
-           "check_trial_runs", "influence_from_trial_runs", "scores",
-           "cross_validate_conditions", "MIL_M",
-           "GMM_KGM"]
+__all__ = ["RigInfluenceModel", "UnbalanceModel", "scores", "cross_validate_conditions"]
 
 logger = logging.getLogger(__name__)
 
-MIL_M = 25.4e-6  # one mil in metres
-GMM_KGM = 1e-6  # one g mm in kg m
 SUPPORTS = ((), (0,), (1,), (0, 1))
 
 
-# ------------------------------------------------------------------------------ data
-@dataclass
-class Campaign:
-    """Per condition: the mean response change of every channel and its labels.
-
-    ``z`` (n_conditions, n_channels) complex, in the file's units and phase convention
-    (NaN where a speed was not recorded); channels are ``(speed_id, probe)`` pairs;
-    ``U`` (n_conditions, 2) complex applied unbalance in g mm (NaN when sealed).
-    """
-
-    conditions: list
-    channels: list
-    z: np.ndarray
-    U: np.ndarray
-    labeled: np.ndarray
-    block: np.ndarray
-    speeds_rpm: dict
-    n_records: np.ndarray
-
-    def subset(self, mask) -> Campaign:
-        """The conditions where ``mask`` is True (same channels and speeds)."""
-        mask = np.asarray(mask, dtype=bool)
-        return replace(self, conditions=[c for c, m in zip(self.conditions, mask,
-                                                              strict=True) if m],
-                       z=self.z[mask], U=self.U[mask], labeled=self.labeled[mask],
-                       block=self.block[mask], n_records=self.n_records[mask])
-
-
-def load_campaign(source, probes=None, response="resp") -> Campaign:
-    """Read a 1x feature table (``sknarx.datasets.load_rk4_unbalance`` format).
-
-    Parameters
-    ----------
-    source : path or DataFrame
-        One row per record with ``condition_id``, ``speed_id``, ``rpm``, ``labeled``,
-        ``block`` (``'baseline'`` for the balanced reference records, which no fold
-        scores), ``U1_re/_im``, ``U2_re/_im`` (g mm) and ``<probe>_<response>_re/_im``.
-    probes : sequence of str, optional
-        The probes to read; default: every probe the table has both columns of.
-    response : str
-        ``'resp'`` (the change from the balanced baseline) or ``'1x'``.
-    """
-    from ..io import read_table
-
-    df = source if isinstance(source, pd.DataFrame) else read_table(source, "feature table")
-    if probes is None:
-        tail = f"_{response}_re"
-        probes = [c[: -len(tail)] for c in df.columns
-                  if c.endswith(tail) and f"{c[: -len(tail)]}_{response}_im" in df.columns]
-        if not probes:
-            raise ValueError(f"The feature table has no probe columns '<probe>{tail}' and "
-                             f"'<probe>_{response}_im' (found {list(df.columns)[:8]}...); see "
-                             "sknarx.datasets.load_rk4_unbalance for the format.")
-    need = ["condition_id", "speed_id", "rpm", "labeled", "block", "U1_re", "U1_im", "U2_re",
-            "U2_im"] + [f"{p}_{response}_{part}" for p in probes for part in ("re", "im")]
-    missing = [c for c in need if c not in df.columns]
-    if missing:
-        raise ValueError(f"The feature table lacks column(s) {missing[:6]} (found "
-                         f"{list(df.columns)[:8]}...); see sknarx.datasets.load_rk4_unbalance "
-                         "for the format.")
-    speed_ids = sorted(df["speed_id"].astype(str).unique())
-    speeds_rpm = {s: float(df.loc[df.speed_id == s, "rpm"].mean()) for s in speed_ids}
-    channels = [(s, p) for s in speed_ids for p in probes]
-    conds = list(dict.fromkeys(df["condition_id"]))
-    z = np.full((len(conds), len(channels)), np.nan + 0j)
-    n = np.zeros(len(conds), dtype=int)
-    first = df.groupby("condition_id", sort=False).first()
-    for i, c in enumerate(conds):
-        g = df[df.condition_id == c]
-        n[i] = len(g)
-        for j, (s, p) in enumerate(channels):
-            rows = g[g.speed_id == s]
-            if len(rows):
-                z[i, j] = np.mean(rows[f"{p}_{response}_re"] + 1j * rows[f"{p}_{response}_im"])
-    U = np.stack([first.loc[conds, "U1_re"] + 1j * first.loc[conds, "U1_im"],
-                  first.loc[conds, "U2_re"] + 1j * first.loc[conds, "U2_im"]], axis=1)
-    U = U.to_numpy() if hasattr(U, "to_numpy") else np.asarray(U)
-    labeled = first.loc[conds, "labeled"].to_numpy().astype(bool)
-    U[~labeled] = np.nan
-    return Campaign(conditions=conds, channels=channels, z=z, U=U.astype(complex),
-                    labeled=labeled, block=first.loc[conds, "block"].to_numpy().astype(str),
-                    speeds_rpm=speeds_rpm, n_records=n)
-
-
-# ------------------------------------------------------------------ rotor model
 @dataclass
 class RigInfluenceModel:
     """Influence of a unit unbalance at each disk on every channel, from a rotor file.
@@ -242,45 +152,6 @@ class RigInfluenceModel:
         return best.x, float(best.cost)
 
 
-def check_trial_runs(campaign: Campaign, trial_runs) -> list[int]:
-    """The rows of ``campaign`` holding the trial runs, one per disk in disk order, or a
-    ``ValueError`` naming a run that is not in the campaign or has no known unbalance on
-    its disk.
-
-    Examples
-    --------
-    >>> from sknarx.datasets import load_rk4_unbalance
-    >>> from sknarx.gap.unbalance import check_trial_runs, load_campaign
-    >>> campaign = load_campaign(load_rk4_unbalance().frame)
-    >>> [campaign.conditions[i] for i in check_trial_runs(campaign, ("A007", "A015"))]
-    ['A007', 'A015']
-    >>> check_trial_runs(campaign, ("A015", "A007"))
-    Traceback (most recent call last):
-    ...
-    ValueError: Trial run 'A015' has no known unbalance on disk 1: name a labelled ...
-    """
-    unknown = [c for c in trial_runs if c not in campaign.conditions]
-    if unknown:
-        raise ValueError(f"The trial runs {unknown} are not conditions of the campaign; name "
-                         "one labelled trial-mass run per disk of it.")
-    rows = [campaign.conditions.index(c) for c in trial_runs]
-    for d, (cid, i) in enumerate(zip(trial_runs, rows, strict=True)):
-        u = campaign.U[i, d]
-        if not np.isfinite(u) or u == 0:
-            raise ValueError(f"Trial run {cid!r} has no known unbalance on disk {d + 1}: "
-                             "name a labelled condition with a trial mass on that disk, in "
-                             "disk order.")
-    return rows
-
-
-def influence_from_trial_runs(campaign: Campaign, trial1: str, trial2: str) -> np.ndarray:
-    """The classical influence-coefficient matrix from one trial-mass run per disk."""
-    rows = check_trial_runs(campaign, (trial1, trial2))
-    cols = [campaign.z[i] / campaign.U[i, d] for d, i in enumerate(rows)]
-    return np.stack(cols, axis=1)
-
-
-# --------------------------------------------------------------- the estimator
 def _correction(H0, U, z, prior_width, sigma2):
     """Per channel: ``delta`` of ``H = H0 (1 + delta)``, ridge toward 0 (MAP estimate)."""
     H = H0.copy()
