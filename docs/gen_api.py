@@ -10,7 +10,8 @@ import inspect
 from pathlib import Path
 
 #: Every public module: the package root and each module a user imports by name.
-MODULES = ("sknarx", "sknarx.rotor", "sknarx.gap", "sknarx.gap.unbalance", "sknarx.datasets",
+MODULES = ("sknarx", "sknarx.rotor", "sknarx.gap", "sknarx.bode", "sknarx.unbalance",
+           "sknarx.datasets",
            "sknarx.reproduce",
            "sknarx.narx.validity", "sknarx.io", "sknarx.orders", "sknarx.plotting")
 

@@ -17,10 +17,6 @@ import sys
 import time
 from pathlib import Path
 
-# Two cores: keep BLAS single-threaded under the process-level parallelism we use.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
 logger = logging.getLogger("sknarx")
 
 # The names are repeated here, not imported, so that ``--help`` and option checks do not
@@ -108,8 +104,7 @@ def _gap(args) -> int:
                          "[rotor] model = 'beam' (see examples/rk4/rotor.toml); the paper's "
                          "rotor takes time-series sweeps (speed, t, a column per DOF).")
     if model == "beam":
-        from .gap.bode_report import write_bode_outputs
-        from .gap.orderdomain import diagnose_order_domain
+        from .bode import diagnose_order_domain, write_bode_outputs
 
         if args.candidates or args.channels or args.no_update or args.second_pass:
             logger.warning("--candidates, --channels, --no-update and --second-pass apply "
@@ -140,16 +135,12 @@ def _gap(args) -> int:
             # the rotor file's alternative readings of its own model (docs/gap.md)
             kw["readings"] = cfg["readings"]
         if args.no_update:
-            from dataclasses import replace
-
-            from .gap import DiagnosisSettings
-
-            kw["settings"] = replace(DiagnosisSettings(), update_nominal=False)
+            kw["update"] = False
         # each finished step is kept until the outputs are written: a stopped run
         # (Ctrl-C, a killed job) started again with the same options resumes
         kept = out / CHECKPOINT_DIR
         result = diagnose(measured, base=base, channels=args.channels, progress=progress,
-                          checkpoint=kept, **kw, **kw_pass)
+                          checkpoint=kept, n_jobs=args.n_jobs, **kw, **kw_pass)
         narx = None
         if not args.no_narx and result["verdict"] != "no-gap":
             narx = narx_view_of(result, measured, base)
@@ -162,29 +153,16 @@ def _gap(args) -> int:
 
 
 def _verdict_line(doc) -> str:
-    """What ``sknarx gap`` prints for its verdict: the share removed, model error where
-    the verdict carries one, the rotor's reading, and for ``unexplained`` the report's
-    sentence on the closest candidate (``diagnosis.json``'s ``closest``) below it, and
-    the report's sentence on a ranked pair the pair trigger kept from the verdict
-    (``pair_under_trigger``), and with a second pass whether the passes agree
-    (``passes``), in the closest candidate's place where they differ."""
-    from .gap.report import closest_text, passes_text, under_trigger_text
+    """What ``sknarx gap`` prints: the verdict and its sentences, as the report states
+    them (:func:`sknarx.gap.report_text.verdict_text`)."""
+    from .gap.report_text import label, verdict_text
 
-    line = (f"verdict: {doc['verdict']}; held-out gap removed: {100 * float(doc['shrink']):.0f} %"
-            + (f"; model error (a linear change, not an effect): {', '.join(doc['model_error'])}"
-               if doc.get("model_error") else "")
-            + (f"; in the rotor's reading {doc['rotor_reading']['label']!r} (model error)"
-               if doc.get("rotor_reading") else ""))
-    changed = (doc.get("passes") or {}).get("changed")
-    # where the passes differ, no time-invariant candidate fell short of a threshold:
-    # the rotor changed, and the passes' sentence says so in the closest candidate's place
-    notes = ["" if changed else closest_text(doc), under_trigger_text(doc), passes_text(doc)]
-    return "\n".join([line, *(t.strip() for t in notes if t.strip())])
+    return f"verdict: {label(doc['verdict'])}\n{verdict_text(doc)}"
 
 
 def _unbalance(args) -> int:
-    from .gap.unbalance_run import identify_unbalance, write_unbalance_outputs
     from .rotor.config import load_config
+    from .unbalance import identify_unbalance, write_unbalance_outputs
 
     out = _check_out(args.out)
     cfg = load_config(args.rotor)
@@ -242,6 +220,9 @@ def _parser() -> argparse.ArgumentParser:
                         "noise, the rotor changed between the passes and the verdict is "
                         "unexplained")
     g.add_argument("--no-narx", action="store_true", help="skip the NARX view")
+    g.add_argument("--n-jobs", type=int, default=None,
+                   help="candidate fits run in parallel (default: one at a time, each "
+                        "running its speed steps on every CPU)")
     g.add_argument("--no-update", action="store_true",
                    help="do not update the nominal rotor's parameters before blaming an "
                    "effect (only the four global nuisance scalars are fitted)")
@@ -275,6 +256,18 @@ def main(argv=None) -> int:
     """Run the command line; returns the exit code (2 for a user error)."""
     args = _parser().parse_args(argv)
     _configure_logging(args)
+    # the commands parallelise over speed steps and candidates themselves: BLAS threads
+    # of their small solves would only fight them for the cores (limited here and in
+    # worker processes; the user's own environment setting wins there)
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run(args)
+
+
+def _run(args) -> int:
     try:
         return args.func(args)
     except KeyboardInterrupt:

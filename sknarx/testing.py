@@ -3,7 +3,7 @@ withheld, for tests, examples and trying the gap diagnosis.
 
 Not part of the modelling or diagnosis pipeline, and not a validation: a trial is
 simulated by the same code the diagnosis fits with (the "inverse crime"); the blind
-validation on plants independent of ``sknarx.rotor`` is ``benchmarks/bench_gap_blind.py``.
+validation on plants independent of ``sknarx.rotor`` is ``validation/`` (docs/validation.md).
 
 A trial draws an effect (or none, a pair, or an effect outside the library), its
 severity and parameters, rig-like nuisance mismatch (a few percent of stiffness,
@@ -161,9 +161,10 @@ def _trial(names, rng, seed, speeds, fs, n_samples, base):
 
 def oracle_gap(measured, truth, heldout, channels=CHANNELS, transient_s=0.5, base=None):
     """Held-out excess gap of the true model (true effects, true nuisance values)."""
-    from .gap.calibration import Calibration, SweepModel, heldout_gap
-    from .gap.features import order_features
+    from .gap.calibration import Calibration, heldout_gap
     from .gap.measured import check_measured
+    from .gap.sweep_model import SweepModel
+    from .orders import order_features
 
     measured, info = check_measured(measured, list(channels))
     model = SweepModel(base=base or RotorParameters(), fs=info["fs"],

@@ -94,31 +94,3 @@ def test_api_reference_is_generated_from_current_docstrings():
     assert "(undocumented)" not in text
 
 
-def test_the_gap_verdict_line_names_the_closest_candidate_of_an_unexplained_verdict():
-    """``sknarx gap``'s verdict line: as before for a named verdict; for ``unexplained``
-    the report's sentence on the closest candidate follows on a line of its own, and so
-    does its sentence on a pair ranked but kept from the verdict by the pair trigger."""
-    from sknarx.cli import _verdict_line
-
-    assert _verdict_line({"verdict": "rub", "shrink": 0.9}) == (
-        "verdict: rub; held-out gap removed: 90 %")
-    doc = {"verdict": "unexplained", "shrink": 0.87,
-           "closest": {"effect": ["rub", "crack"], "short_of": ["shrink", "breadth"],
-                       "shrink": 0.5, "log_shrink": 0.1,
-                       "min_shrink": 0.6, "min_log_shrink": 0.3}}
-    assert _verdict_line(doc) == (
-        "verdict: unexplained; held-out gap removed: 87 %\nThe closest candidate, rub + "
-        "crack, removes 50 % of the held-out gap and 10 % of its logarithm, where a named "
-        "effect needs 60 % and 30 %.")
-    doc["closest"]["short_of"] = []
-    assert _verdict_line(doc) == "verdict: unexplained; held-out gap removed: 87 %"
-    # a named single with a ranked pair the pair trigger kept from the verdict
-    doc = {"verdict": "runout", "shrink": 0.99,
-           "pair_under_trigger": {"effect": ["runout", "anisotropy"], "single": "runout",
-                                  "removes_of_single": 0.68,
-                                  "single_leaves_per_feature": 0.146, "pair_trigger": 0.5}}
-    assert _verdict_line(doc) == (
-        "verdict: runout; held-out gap removed: 99 %\nThe pair runout + anisotropy is "
-        "ranked and removes 68 % of what runout alone leaves, but runout already leaves "
-        "0.146 per feature, no more than the 0.5 a second effect must explain to be "
-        "named: a lead to check, not a finding.")

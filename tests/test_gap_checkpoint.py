@@ -8,15 +8,22 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-import sknarx.gap.diagnosis as D
-from sknarx.gap import DiagnosisSettings, diagnose
-from sknarx.gap.checkpoint import Checkpoint, fingerprint
+import sknarx.gap.sweep_front as F
+import sknarx.gap.timeseries as D
+from sknarx._checkpoint import Checkpoint, fingerprint
+from sknarx.gap import SearchBudget, diagnose
 from sknarx.io import json_safe
 from sknarx.testing import make_trial
 
 SPEEDS = tuple(np.linspace(81.7, 276.5, 6).round(4))
-FAST = DiagnosisSettings(n_probe=8, max_nfev=8, update_spread=False)
+FAST = SearchBudget(n_probe=8, max_nfev=8)
 CALIBRATE = D.calibrate
+
+
+def _patch(monkeypatch, calibrate):
+    """Every calibration of a diagnosis (the nuisance fit's and the candidates')."""
+    monkeypatch.setattr(D, "calibrate", calibrate)
+    monkeypatch.setattr(F, "calibrate", calibrate)
 
 
 class _Stopped(Exception):
@@ -48,19 +55,19 @@ def runout_sweep():
 @pytest.mark.slow
 def test_a_stopped_diagnosis_resumes_and_gives_the_uninterrupted_result(
         runout_sweep, tmp_path, monkeypatch):
-    kw = {"candidates": ("runout", "crack"), "settings": FAST}
+    kw = {"candidates": ("runout", "crack"), "budget": FAST}
     counting, plain_calls = _counting()
-    monkeypatch.setattr(D, "calibrate", counting)
+    _patch(monkeypatch, counting)
     plain = diagnose(runout_sweep, **kw)
 
     stopping, done_before = _counting(stop_after=3)
-    monkeypatch.setattr(D, "calibrate", stopping)
+    _patch(monkeypatch, stopping)
     with pytest.raises(_Stopped):
         diagnose(runout_sweep, checkpoint=tmp_path / "kept", **kw)
     assert len(done_before) == 3
 
     counting, resumed_calls = _counting()
-    monkeypatch.setattr(D, "calibrate", counting)
+    _patch(monkeypatch, counting)
     resumed = diagnose(runout_sweep, checkpoint=tmp_path / "kept", **kw)
     # the three finished calibrations were read back, not run again
     assert len(resumed_calls) == len(plain_calls) - 3
@@ -69,7 +76,7 @@ def test_a_stopped_diagnosis_resumes_and_gives_the_uninterrupted_result(
 
     # finished: a rerun reads every step back, the nominal update's too
     counting, again_calls = _counting()
-    monkeypatch.setattr(D, "calibrate", counting)
+    _patch(monkeypatch, counting)
 
     def not_again(*args, **kw):
         raise AssertionError("the nominal update was computed again")
@@ -86,11 +93,11 @@ def test_a_checkpoint_of_other_inputs_is_started_over(tmp_path):
         calls.append(x)
         return x + 1
 
-    Checkpoint(tmp_path, {"settings": FAST}).step("step", 1, lambda: work(1))
-    other = Checkpoint(tmp_path, {"settings": replace(FAST, max_nfev=9)})
+    Checkpoint(tmp_path, {"budget": FAST}).step("step", 1, lambda: work(1))
+    other = Checkpoint(tmp_path, {"budget": replace(FAST, max_nfev=9)})
     assert list(tmp_path.glob("*.pkl")) == []  # the other run's steps are gone
     assert other.step("step", 1, lambda: work(1)) == 2 and calls == [1, 1]
-    same = Checkpoint(tmp_path, {"settings": replace(FAST, max_nfev=9)})
+    same = Checkpoint(tmp_path, {"budget": replace(FAST, max_nfev=9)})
     assert same.step("step", 1, lambda: work(1)) == 2 and calls == [1, 1]
     assert (same.reused, same.computed) == (1, 0)
 

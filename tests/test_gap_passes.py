@@ -1,13 +1,10 @@
 """Two passes of one sweep compared model-free (sknarx.gap.passes), and the verdict with them.
 
-The floor is the package's frozen one (set on own-family effect-free pairs of passes,
-``benchmarks/bench_gap_passes.py --null``); the plant tests use the second derivation,
-whose code shares nothing with ``sknarx.rotor``.
+The test's level is the rule's false-alarm level; the plant tests use the second
+derivation, whose code shares nothing with ``sknarx.rotor``.
 """
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -15,12 +12,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from sknarx import cli  # noqa: E402
-from sknarx.gap import DiagnosisSettings, GapDiagnosis, diagnose  # noqa: E402
-from sknarx.gap.core import with_passes  # noqa: E402
-from sknarx.gap.passes import compare_passes  # noqa: E402
+from sknarx import cli
+from sknarx.gap import GapDiagnosis, SearchBudget, VerdictRule, diagnose
+from sknarx.gap.document import with_passes
+from sknarx.gap.passes import compare_passes
 
 SPEEDS = (100.0, 140.0, 180.0, 220.0, 260.0)
 
@@ -44,7 +39,7 @@ def one_pass(seed, amplitude=lambda w: 2e-5, shift=0.0, speeds=SPEEDS, noise=1e-
 def test_passes_of_an_unchanged_rotor_agree_and_a_changed_one_is_found_where_it_changed():
     same = compare_passes(one_pass(1), one_pass(2))
     assert not same.changed and same.statistic < same.floor
-    assert same.floor == DiagnosisSettings().pass_floor_sigmas
+    assert same.floor == VerdictRule().pass_sigmas
     # a bow of 3 um at the lowest step only (as a bow relaxes, the first step carries most)
     bowed = one_pass(1, amplitude=lambda w: 2e-5 + (3e-6 if w == SPEEDS[0] else 0.0))
     diff = compare_passes(bowed, one_pass(2))
@@ -58,24 +53,23 @@ def test_passes_of_an_unchanged_rotor_agree_and_a_changed_one_is_found_where_it_
 
 
 def test_the_relative_tolerance_sets_the_smallest_change_the_passes_show():
-    """``pass_rtol`` is what a record cannot pin down of a rig's repeatability: a 1x
-    that grew 1 % at every step is inside the package's 1 % and seen at 0.3 %, and an
+    """The rule's ``rtol`` is what a record cannot pin down of a rig's repeatability: a
+    1x that grew 1 % at every step is inside the package's 1 % and seen at 0.3 %, and an
     unchanged rotor stays under the floor at both."""
-    from dataclasses import replace
-
-    tight = replace(DiagnosisSettings(), pass_rtol=0.003)
+    tight = VerdictRule(rtol=0.003)
     grown = one_pass(1, amplitude=lambda w: 2.02e-5)
-    assert DiagnosisSettings().pass_rtol == 0.01
+    assert VerdictRule().rtol == 0.01
     assert not compare_passes(grown, one_pass(2)).changed
-    assert compare_passes(grown, one_pass(2), settings=tight).changed
-    assert not compare_passes(one_pass(1), one_pass(2), settings=tight).changed
+    assert compare_passes(grown, one_pass(2), rule=tight).changed
+    assert not compare_passes(one_pass(1), one_pass(2), rule=tight).changed
 
 
 def test_a_second_pass_whose_steps_sit_a_little_apart_is_compared_at_its_slope():
     """A rig's speed control repeats a step to a fraction of a per cent: on a steep flank
     of a resonance that moves the 1x by much more than the noise, which the first pass's
-    slope over speed times the distance admits. Steps further apart than
-    ``pass_speed_rtol`` are not the same step."""
+    slope over speed times the distance admits. Steps further apart than the rule's
+    ``speed_rtol`` are not the same step; a rule that asks steps to agree to 0.1 % does
+    not match these."""
     steep = lambda w: 2e-5 * (1.0 + 0.5 * np.sin(w / 15.0))  # noqa: E731
     moved = tuple(w * 1.003 for w in SPEEDS)
     got = compare_passes(one_pass(1, steep), one_pass(2, steep, speeds=moved))
@@ -83,6 +77,9 @@ def test_a_second_pass_whose_steps_sit_a_little_apart_is_compared_at_its_slope()
     assert [b for _, b in got.speed_pairs] == pytest.approx(moved)
     with pytest.raises(ValueError, match="share no speed step within 0.5 %"):
         compare_passes(one_pass(1), one_pass(2, speeds=tuple(w * 1.02 for w in SPEEDS)))
+    with pytest.raises(ValueError, match="share no speed step within 0.1 %"):
+        compare_passes(one_pass(1, steep), one_pass(2, steep, speeds=moved),
+                       rule=VerdictRule(speed_rtol=0.001))
 
 
 def test_steps_one_pass_lacks_are_left_out_and_said():
@@ -141,27 +138,30 @@ def test_a_drift_inside_the_dead_band_never_reads_as_a_change(scale, size, phase
 
 def test_the_real_rigs_unchanged_repeats_are_called_changed_no_more_than_the_floor_allows():
     """The RK-4 rig's repeated acquisitions of one mounted condition (285 pairs, shipped
-    in ``sknarx.datasets``, noise estimated from the repeats: ``bench_gap_passes_real``)
-    are two passes of an unchanged real rotor. Beyond the package's 1 % dead band no
-    more of them are called changed than a test at its 1 % point allows (3; the largest
+    in ``sknarx.datasets``, noise estimated from the repeats: ``validation.repeats``)
+    are two passes of an unchanged real rotor. Beyond the rule's 1 % dead band no more
+    of them are called changed than a test at its 1 % point allows (3; the largest
     A023, whose 1x drifted 2.8 % between its first and third acquisition); a 3 % band
-    calls none; a 0.3 % band, below the rig's own 0.2-0.7 % repeatability, calls ten."""
-    import bench_gap_passes_real as real
+    calls none; a 0.3 % band, below the rig's own 0.2-0.7 % repeatability, calls ten:
+    the default ``rtol`` is what this rig repeats."""
+    from dataclasses import replace
 
     from sknarx.datasets import load_rk4_unbalance
+    from validation import repeats as real
 
     pairs = real.repeated_pairs(load_rk4_unbalance().frame)
     rep = real.repeatability(pairs)
     se = max(v["noise_mil"] for v in rep.values())
     assert len(pairs) == 285
     assert 0.002 < max(v["relative"] for v in rep.values()) < 0.008
-    floor = DiagnosisSettings().pass_floor_sigmas
+    rule = VerdictRule()
 
     def called(rtol):
+        r = replace(rule, rtol=rtol)
         return {(c, a, b) for c, a, b, f, g in pairs
-                if real.statistic(f, g, se, rtol) > floor}
+                if real.statistic(f, g, se, r) > r.pass_sigmas}
 
-    at_package = called(DiagnosisSettings().pass_rtol)
+    at_package = called(rule.rtol)
     assert len(at_package) <= 0.011 * len(pairs) and ("A023", 1, 3) in at_package
     assert called(0.03) == set()
     assert len(called(0.003)) >= 10
@@ -176,7 +176,10 @@ def test_a_pass_compared_with_itself_has_no_excess():
 def _named():
     doc = {"verdict": "crack", "shrink": 0.8, "shrink_band": [0.7, 0.9],
            "gap_after": {"heldout_excess": 1.0}, "regions_after": [],
-           "setting_decided": True, "ranking": [{"effect": "crack"}]}
+           "setting_decided": True, "ranking": [{"effect": "crack"}],
+           "gap_before": {"per_feature": 4.0, "floor": {
+               "floor_per_feature": 0.2, "noise_per_feature": 0.1, "false_alarm": 0.01}},
+           "settings": {"rule": VerdictRule().to_dict()}}
     return GapDiagnosis(doc, front_end="time-series", tables={"after": pd.DataFrame()})
 
 
@@ -196,13 +199,13 @@ def test_passes_that_differ_make_the_verdict_unexplained_and_keep_what_one_pass_
 
 
 def test_the_report_and_the_verdict_line_say_what_the_passes_showed(tmp_path):
-    from sknarx.gap.report import passes_text
+    from sknarx.gap.report_text import passes_text
 
     bowed = one_pass(1, amplitude=lambda w: 2.5e-5)
     doc = dict(with_passes(_named(), compare_passes(bowed, one_pass(2))).document)
     text = passes_text(doc)
     assert "the rotor changed between them" in text
-    assert "The first pass alone: crack" in text and "80 %" in text
+    assert "The first pass alone: crack." in text
     line = cli._verdict_line(doc)
     assert line.startswith("verdict: unexplained") and "changed between them" in line
     agree = dict(with_passes(_named(), compare_passes(one_pass(1), one_pass(2))).document)
@@ -224,7 +227,7 @@ def test_on_the_second_plant_only_a_relaxing_bow_makes_its_passes_differ(kind, d
     """The second derivation's coast-down after its run-up (its own noise and keyphasor
     jitter): an effect-free rotor and a cracked one agree with themselves, a thermal bow
     still relaxing does not, most at the low speeds' 1x, where the bow is largest."""
-    from plants.families import make_family_passes
+    from validation.plants.families import make_family_passes
 
     first, second, truth = make_family_passes(kind, 59007, "second")
     got = compare_passes(first, second)
@@ -239,13 +242,12 @@ def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained(tmp_path):
     nothing (the update follows the bow); with the coast-down the verdict is
     unexplained, what the first pass said is kept, and the report says where the
     passes differ."""
-    from plants.families import make_family_passes
-
     from sknarx.gap.report import write_gap_outputs
+    from validation.plants.families import make_family_passes
 
     first, second, _ = make_family_passes("thermal-bow", 59007, "second")
-    fast = DiagnosisSettings(n_probe=8, max_nfev=6, update_spread=False)
-    d = diagnose(first, candidates=("runout",), settings=fast, second_pass=second)
+    fast = SearchBudget(n_probe=8, max_nfev=6)
+    d = diagnose(first, candidates=("runout",), budget=fast, second_pass=second)
     assert d["verdict"] == "unexplained"
     assert d["passes"]["changed"] and "verdict" in d["passes"]["one_pass"]
     assert d["passes"]["one_pass"]["verdict"] != "unexplained"
@@ -256,176 +258,13 @@ def test_diagnose_with_a_second_pass_calls_a_relaxing_bow_unexplained(tmp_path):
     assert "Two passes of the sweep" in html and "the rotor changed between them" in html
 
 
-def test_a_logged_trial_measured_in_two_passes_is_decided_as_diagnose_decides_it():
-    """The blind benchmark's scoring reads a trial's pass statistic as ``diagnose`` does:
-    over the floor the verdict is unexplained, whatever the ranking; under it, or
-    without a second pass, the ranking decides."""
-    from bench_gap_blind import passes_differ, verdict
-
-    s = DiagnosisSettings()
-    rec = {"kind": "runout", "e0": 5.0, "n_features": 100, "ranking": []}
-    assert not passes_differ(rec, s)
-    over = {**rec, "passes": {"statistic": s.pass_floor_sigmas + 0.1}}
-    under = {**rec, "passes": {"statistic": s.pass_floor_sigmas - 0.1}}
-    assert passes_differ(over, s) and verdict(over, s)[0] == "unexplained"
-    assert not passes_differ(under, s)
-    assert verdict(under, s) == verdict(rec, s)
-    # rescore_gap_blind --one-pass: the same trial decided from its first pass alone
-    from rescore_gap_blind import first_pass_only
-
-    assert verdict(first_pass_only(over), s) == verdict(rec, s)
-    assert "passes" in over
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("family, n, bows, out_of_library, top1, false_alarm", [
-    ("second", 315, 20, ([49, 65], [62, 65]), [137, 160], [0, 45]),
-    ("ross", 298, 24, ([48, 69], [64, 69]), [117, 137], [0, 50]),
-])
-def test_the_logged_trials_with_their_coast_down_give_the_record(
-        family, n, bows, out_of_library, top1, false_alarm):
-    """``bench_gap_passes.py --report-only --code ...`` from the committed logs of the
-    package rule's runs 51000-59000 (the report's code: the dead band's since
-    2026-12-05; the first form's decided the same): every relaxing bow's passes differ
-    and no other
-    trial's do, so out-of-library rises and nothing else moves (docs/gap.md, *Two passes
-    of one sweep*)."""
-    import bench_gap_passes as bench
-
-    report = json.loads((bench.RESULTS / "bench_gap_passes.json").read_text())
-    trials = bench.evaluation_trials(family)
-    comps = bench.logged("eval", family, report["code"])
-    assert len(trials) == n and all(t[1]["seed"] in comps for t in trials)
-    assert not any("skipped" in c for c in comps.values())
-    one, two = _only_the_bows_differ(report, family, trials, comps, bows, out_of_library)
-    assert one["top1"] == top1 and two["false_alarm"] == false_alarm
-
-
-def _only_the_bows_differ(report, family, trials, comps, bows, out_of_library):
-    """Every relaxing bow's passes differ and no other trial's, so out-of-library rises
-    as given and no other rate moves; the report says the same. Returns both sides'
-    rates."""
-    import bench_gap_passes as bench
-
-    pooled, by_kind = bench.rates(trials, comps, DiagnosisSettings().pass_floor_sigmas)
-    assert by_kind['"thermal-bow"'] == [bows, bows]
-    assert sum(v[0] for k, v in by_kind.items() if k != '"thermal-bow"') == 0
-    one, two = pooled["one_pass"], pooled["two_passes"]
-    assert (one["unexplained_out_of_library"], two["unexplained_out_of_library"]) == \
-        out_of_library
-    for rate in ("top1", "pairs_in_top2", "pairs_verdict", "false_alarm"):
-        assert one[rate] == two[rate], rate
-    assert report["families"][family]["two_passes"]["unexplained_out_of_library"] == \
-        out_of_library[1]
-    return one, two
-
-
-@pytest.mark.parametrize("family, n, bows, out_of_library", [
-    ("second", 60, 3, ([10, 12], [12, 12])),
-    ("ross", 61, 5, ([8, 14], [13, 14])),
-])
-def test_the_61000_run_compared_again_under_the_dead_band_decides_as_it_ran(
-        family, n, bows, out_of_library):
-    """The 61000 run was measured in two passes with the test's first form (its logs hold
-    that statistic). ``bench_gap_passes.py --run ...61000...`` compares its trials again
-    under the dead band (``results/bench_gap_passes_61000.json``): each trial's passes
-    differ exactly where the run's did -- every visible relaxing bow, nothing else -- so
-    every rate of the run in two passes stands (docs/gap_validation.md, *Two passes of
-    one sweep: the dead band*)."""
-    import bench_gap_blind as blind
-    import bench_gap_passes as bench
-    from frontier_gap_blind import PackageRun
-
-    report = json.loads((bench.RESULTS / "bench_gap_passes_61000.json").read_text())
-    run = PackageRun("results/bench_gap_blind_61000_c8e46b2.json", "3664de5")
-    trials = bench.evaluation_trials(family, (run,))
-    comps = bench.logged("eval", family, report["code"])
-    assert len(trials) == n and all(t[1]["seed"] in comps for t in trials)
-    floor = DiagnosisSettings().pass_floor_sigmas
-    for _, rec, rule in trials:
-        # the first form's decision, as the run logged it, against the dead band's
-        assert blind.passes_differ(rec, rule) == (comps[rec["seed"]]["statistic"] > floor)
-    _only_the_bows_differ(report, family, trials, comps, bows, out_of_library)
-
-
-@pytest.mark.parametrize("argv, message", [
-    (["--pass-rtol", "1.5"], "give a share of a vector's size in [0, 1)"),
-    (["--pass-rtol", "0.0031", "--report-only"], "no floor measured at this tolerance"),
-    (["--code", "abc"], "--code reads old logs"),
-    (["--run", "results/no_such_report.json:abc"], "give a blind run's report and its logs'"),
-    (["--run", "results/bench_gap_blind_61000_c8e46b2.json"], "give a blind run's report"),
-])
-def test_the_passes_benchmark_names_a_usage_error(argv, message, capsys):
-    """Another tolerance is another test: it is decided only at a floor its own null
-    pairs measured, never at the package's."""
-    import bench_gap_passes as bench
-
-    with pytest.raises(SystemExit) as exc:
-        bench.main(argv)
-    assert exc.value.code == 2
-    assert message in capsys.readouterr().err
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("family, bows, least_compared", [("second", 20, 315), ("ross", 24, 298)])
-def test_the_dead_band_decides_the_logged_trials_as_the_first_form_did(
-        family, bows, least_compared):
-    """The logged trials of 51000-59000 compared again under the dead band (code hash
-    ``5aefd9aa0f44e4d5``, every trial of both plants): every relaxing bow's passes differ, with
-    a wider margin than under the first form, and no other trial's do -- line pickups,
-    cage faults and effect-free sweeps included (docs/gap_validation.md, *Two passes of
-    one sweep: the dead band*)."""
-    import bench_gap_passes as bench
-
-    floor = DiagnosisSettings().pass_floor_sigmas
-    comps = bench.logged("eval", family, "5aefd9aa0f44e4d5")
-    trials = [(cat, rec) for cat, rec, _ in bench.evaluation_trials(family)
-              if rec["seed"] in comps]
-    assert len(trials) >= least_compared
-    assert {cat for cat, _ in trials} >= {"out-of-library", "effect-free"}
-    bow = [comps[r["seed"]]["statistic"] for _, r in trials if r["kind"] == "thermal-bow"]
-    other = [comps[r["seed"]]["statistic"] for _, r in trials if r["kind"] != "thermal-bow"]
-    assert len(bow) == bows and min(bow) > 10 * floor
-    assert max(other) < floor - 5.0
-    null = bench.logged("null", "own", "5aefd9aa0f44e4d5")
-    assert len(null) == 20 and bench.null_floor([r["statistic"] for r in null.values()]) \
-        == floor
-
-
-def test_a_blind_trial_in_two_passes_diagnoses_with_both_and_logs_the_test(monkeypatch):
-    """bench_gap_blind --second-pass: the trial's first pass is the one-pass trial's
-    measurement, the second its plant's coast-down, both go to diagnose, and the passes'
-    test is logged where the scoring reads it (diagnose stubbed: its own test is above)."""
-    import bench_gap_blind as blind
-    from plants.families import make_family_passes
-
-    seen = {}
-
-    def fake_diagnose(measured, second_pass=None, **kw):
-        seen["first"], seen["second"] = measured, second_pass
-        doc = {"gap_before": {"heldout_excess": 9.0, "per_feature": 0.09},
-               "split": {"heldout_speeds": [103.3111]}, "n_heldout_features": 100,
-               "ranking": [], "nominal_update": None, "records": {
-                   "starts_with_transient": False},
-               "passes": compare_passes(measured, second_pass).to_dict()}
-        tables = {"before": pd.DataFrame({"feature": ["1x"], "excess": [0.0], "z2": [1.0]})}
-        return GapDiagnosis(doc, front_end="time-series", tables=tables)
-
-    monkeypatch.setattr(blind, "diagnose", fake_diagnose)
-    rec = blind.run_trial("thermal-bow", 59007, "second", DiagnosisSettings(),
-                          second_pass=True)
-    first, second, _ = make_family_passes("thermal-bow", 59007, "second")
-    pd.testing.assert_frame_equal(seen["first"], first)
-    pd.testing.assert_frame_equal(seen["second"], second)
-    assert rec["passes"]["changed"] and blind.passes_differ(rec, DiagnosisSettings())
-
-
 @pytest.mark.slow
 def test_sknarx_gap_with_a_second_pass_file_end_to_end(tmp_path):
     """As a user runs it: the run-up and the coast-down as two CSV files; the verdict
     line says the passes differ, and diagnosis.json carries them."""
-    from plants.families import make_family_passes
     from test_cli_errors import run
+
+    from validation.plants.families import make_family_passes
 
     up, down, _ = make_family_passes("thermal-bow", 59007, "second")
     up.to_csv(tmp_path / "up.csv", index=False)

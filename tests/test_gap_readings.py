@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from sknarx.gap.readings import check_readings, reading_contenders
-from sknarx.gap.report import _candidate_label, _reading_text
+from sknarx.gap.report import candidate_label as _candidate_label
+from sknarx.gap.report_text import reading_text as _reading_text
 
 
 @pytest.mark.parametrize(
@@ -63,14 +64,12 @@ def test_a_reading_that_changes_nothing_fits_what_the_rotor_as_given_fits(tmp_pa
     """The readings are compared on the rotor as given's features and tolerance: a
     reading equal to that rotor repeats its update, its nuisance-only model and its
     contenders' fits exactly, and decides as it does."""
-    from sknarx.gap import DiagnosisSettings, diagnose
+    from sknarx.gap import diagnose
     from sknarx.testing import make_trial
 
     speeds = tuple(np.linspace(81.7, 276.5, 6).round(4))
     measured, _ = make_trial("runout", 7, speeds=speeds, n_samples=1000)
-    # the update's spread over its sigma points is the rotor as given's alone (the
-    # readings share its tolerance): left out, the test costs a third less
-    d = diagnose(measured, candidates=("runout",), settings=DiagnosisSettings(update_spread=False),
+    d = diagnose(measured, candidates=("runout",),
                  readings={"as given": {"tilt_share_O": 0.0}})
     entry = d["rotor_readings"][0]
     assert entry["contenders"] == ["runout"] and entry["label"] == "as given"

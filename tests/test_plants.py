@@ -1,6 +1,6 @@
 """The independent plants of the blind benchmark, and the diagnosis on them (fast subset).
 
-The plants live in ``benchmarks/plants`` (they are test equipment, not the package):
+The plants live in ``validation/plants`` (they are test equipment, not the package):
 a second derivation of the paper's rotor and the ROSS finite-element plant. These
 tests check that each is the rotor it claims to be, that its faults leave their
 signatures, and that the nominal update stays physical on a plant written from other
@@ -8,16 +8,13 @@ readings of the paper and finds where its dampers act (the diagnosis end to end 
 them: ``test_plants_diagnosis.py``).
 """
 
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from plants.families import (  # noqa: E402
+from sknarx.orders import harmonic_basis
+from validation.plants.families import (
     CHANNELS,
     SPEEDS,
     _own_sweep,
@@ -25,9 +22,7 @@ from plants.families import (  # noqa: E402
     make_family_trial,
     simulate,
 )
-from plants.second_derivation import SecondDerivationPlant, SecondRotor  # noqa: E402
-
-from sknarx.orders import harmonic_basis  # noqa: E402
+from validation.plants.second_derivation import SecondDerivationPlant, SecondRotor
 
 
 def _orders(t, x, w, k):
@@ -100,7 +95,7 @@ def test_the_thermal_bow_relaxes_step_by_step(monkeypatch):
     # each step is the plant with that step's bow, settled on its own: the relaxing bow
     # is what keeps it out of the library (a fixed one is runout plus unbalance);
     # three of the steps, settled 0.1 s, keep the test short
-    from plants import families
+    from validation.plants import families
 
     monkeypatch.setattr(families, "SPEEDS", SPEEDS[:3])
     monkeypatch.setitem(families._SWEEP, "own", (_own_sweep, 0.1))
@@ -122,7 +117,7 @@ def test_the_thermal_bow_relaxes_step_by_step(monkeypatch):
 
 def test_the_families_read_their_speed_steps_at_call_time(monkeypatch):
     # bench_gap_cost.py diagnoses 19-step sweeps by setting plants.families.SPEEDS
-    from plants import families
+    from validation.plants import families
 
     monkeypatch.setattr(families, "SPEEDS", (100.0, 150.0))
     monkeypatch.setitem(families._SWEEP, "own", (_own_sweep, 0.0))  # short: steps only
@@ -150,7 +145,7 @@ def test_every_family_ripples_the_speed_as_drawn(family, monkeypatch):
     angle's deviation ``a Omega / (2 pi f) (sin(2 pi f t + phase) - sin(phase))`` (up to a
     constant: the response lags the angle by the same amount all through a slow ripple
     far below the critical speed) -- the same law in all three codes."""
-    from plants import families
+    from validation.plants import families
 
     if family == "ross":
         pytest.importorskip("ross")
@@ -177,8 +172,8 @@ def test_every_family_ripples_the_speed_as_drawn(family, monkeypatch):
 @pytest.mark.slow
 def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
     pytest.importorskip("ross")
-    from plants.families import measure
-    from plants.ross_paper_rotor import ross_sweep
+    from validation.plants.families import measure
+    from validation.plants.ross_paper_rotor import ross_sweep
 
     # seed 4: an A-O1 crack of depth 0.34 (seed 3's O2-B crack of depth 0.42 makes the
     # ROSS integration fail at 255 rad/s; the benchmark logs such a trial as skipped).
@@ -200,7 +195,7 @@ def test_ross_plant_runs_a_settled_sweep_and_its_crack_shows_in_the_two_x():
 
 def test_ross_crack_as_written_drops_the_coupling_the_rotated_form_keeps():
     pytest.importorskip("ross")
-    from plants.ross_paper_rotor import PaperRotorROSS, RossPlant
+    from validation.plants.ross_paper_rotor import PaperRotorROSS, RossPlant
 
     crack = {"crack": {"station": "A-O1", "depth": 0.45, "angle": 0.0}}
     with warnings.catch_warnings():
@@ -236,7 +231,7 @@ def test_ross_rub_friction_as_written_keeps_one_direction_wherever_the_contact_i
     the contact is on the x axis it acts along the radius, where a Coulomb friction would
     act along the tangent against the sliding."""
     pytest.importorskip("ross")
-    from plants.ross_paper_rotor import PaperRotorROSS, RossPlant
+    from validation.plants.ross_paper_rotor import PaperRotorROSS, RossPlant
 
     mu, k, clearance, radius, whirl = 0.15, 3e6, 5e-4, 1e-3, 200.0  # -, N/m, m, m, rad/s
 
@@ -265,10 +260,10 @@ def test_ross_rub_friction_as_written_keeps_one_direction_wherever_the_contact_i
 
 @pytest.mark.slow
 def test_update_stays_physical_and_finds_where_the_second_plants_dampers_act():
-    from sknarx.gap import DiagnosisSettings
-    from sknarx.gap.diagnosis import _update_nominal
-    from sknarx.gap.features import order_features
+    from sknarx.gap import SearchBudget
     from sknarx.gap.measured import check_measured
+    from sknarx.gap.timeseries import _update_nominal
+    from sknarx.orders import order_features
     from sknarx.rotor import RotorParameters
 
     meas, truth, _, _ = make_family_trial(None, 1, "second")
@@ -278,7 +273,7 @@ def test_update_stays_physical_and_finds_where_the_second_plants_dampers_act():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         upd = _update_nominal(feats, speeds[0::2], info["channels"], RotorParameters(), info,
-                              0.0, 2.0, DiagnosisSettings())
+                              0.0, 2.0, SearchBudget())
     tab = upd.table.set_index("parameter")
     # nothing is dragged beyond three prior widths (with one fixed 1 % tolerance k2
     # moved x18 and c_b x93 on this sweep)

@@ -47,34 +47,6 @@ def test_an_empty_table_says_why():
     assert "<table>" in table([[1, "x"]], ["a", "b"])
 
 
-def test_what_the_search_tested_reads_in_the_ranking_table_even_for_a_diverged_fit():
-    from sknarx.gap.report import _discrete_text, _linear_form_text
-
-    entry = {"discrete_settings": [
-        {"setting": {"crack": {"station": "A-O1"}}, "heldout_gap_after": 120.25},
-        {"setting": {"crack": {"station": "O2-B"}}, "heldout_gap_after": "inf"}],
-        "linear_form_tests": [{"member": "anisotropy", "linear_form": "support-flexibility",
-                               "heldout_gap_after": 310.0, "score": 316.0,
-                               "outcome": "effect"}]}
-    assert _discrete_text(entry) == "held-out excess by setting: crack A-O1 120.2; crack O2-B inf"
-    assert "support-flexibility: an effect (the linear form leaves 310)" in _linear_form_text(entry)
-    assert _discrete_text({}) == _linear_form_text({}) == ""
-
-
-def test_a_verdict_naming_runout_says_a_bent_shaft_reads_the_same():
-    """The headline of a verdict names what such data cannot tell each named effect
-    from (its class's ``alike``): a runout, alone or in a pair, from a shaft bow; an
-    effect with nothing alike adds nothing."""
-    from sknarx.gap.report import alike_text
-    from sknarx.rotor import EFFECTS
-
-    alone = alike_text("runout")
-    assert alone.startswith(" These data cannot tell the runout from a bent shaft")
-    assert "a speed measured again after the sweep" in alone
-    assert alike_text(["crack", "runout"]) == alone
-    assert alike_text("crack") == "" and not EFFECTS["crack"].alike
-
-
 def test_an_output_is_written_whole_or_not_at_all(tmp_path):
     """A run stopped mid-write leaves the previous file and no temporary beside it: every
     report, table and figure goes through io.write_atomic."""

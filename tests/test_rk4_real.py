@@ -218,7 +218,7 @@ def test_nominal_calibration_fixes_the_critical_speed(diagnosis):
 
 
 def test_bode_loader_units_and_binning():
-    from sknarx.gap.bode import bin_bode, load_bode
+    from sknarx.bode.records import bin_bode, load_bode
 
     rows = load_bode(DATA, {"speed_column": "rpm", "amplitude_column": "amp_1x",
                             "amplitude_scale": 127e-6, "phase_column": "phase_1x_deg"})

@@ -2,6 +2,7 @@
 no module imports another that imports it back."""
 
 import ast
+import re
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "sknarx"
@@ -102,25 +103,65 @@ def test_no_pipeline_module_imports_the_test_equipment():
 
 
 def test_one_gap_core_and_front_ends_that_write_nothing():
-    """Both measurement front ends rank, decide and bootstrap through the gap core and
-    return a result; only the report modules write files."""
+    """Both measurement front ends search, rank, decide and state the verdict through
+    the one core (search, rule, evidence, document) and return a result; only the
+    report modules write files."""
     gap = PKG / "gap"
-    core_steps = {"rank", "decide", "preferred", "bootstrap_shrink", "log_shrink",
-                  "alternating_split", "search", "conclude"}
+    core = {"search.py": {"rank", "search"}, "rule.py": {"decide", "preferred"},
+            "evidence.py": {"bootstrap_shrink", "log_shrink", "alternating_split"},
+            "document.py": {"verdict_entries"}}
+    steps = set().union(*core.values())
     for path in gap.glob("*.py"):
-        if path.name == "core.py":
-            continue
         tree = ast.parse(path.read_text())
         defined = {n.name.lstrip("_") for n in ast.walk(tree)
-                   if isinstance(n, ast.FunctionDef) and n.col_offset == 0}
-        assert not defined & core_steps, f"{path.name} redefines {defined & core_steps}"
-    for front in ("diagnosis.py", "orderdomain.py"):
-        tree = ast.parse((gap / front).read_text())
+                   if isinstance(n, ast.FunctionDef)} - core.get(path.name, set())
+        assert not defined & steps, f"{path.name} redefines {defined & steps}"
+    for front in (gap / "timeseries.py", PKG / "bode" / "diagnosis.py"):
+        tree = ast.parse(front.read_text())
         calls = {n.func.attr for n in ast.walk(tree)
                  if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)}
         assert not calls & {"write_text", "to_csv", "savefig", "mkdir"}, front
-        assert "sknarx.gap.core" in imports(gap / front)
-        assert not imports(gap / front) & {"sknarx.gap.report", "sknarx.gap.bode_report"}
+        assert {"sknarx.gap.search", "sknarx.gap.document"} <= imports(front)
+        assert not imports(front) & {"sknarx.gap.report", "sknarx.bode.report"}
+
+
+def test_the_gap_package_is_rooms_a_newcomer_can_read():
+    """One concept a module: none in gap/ over 600 lines, gap/ under 5,000 in all."""
+    sizes = {p.name: len(p.read_text().splitlines()) for p in (PKG / "gap").glob("*.py")}
+    assert max(sizes.values()) <= 600, sizes
+    assert sum(sizes.values()) < 5000, sum(sizes.values())
+
+
+#: what run history looks like in a comment or docstring: a date, a benchmark or record
+#: path, a validation plant by name, a logged trial's seed or run, a commit
+HISTORY = re.compile(r"\b20\d\d-\d\d-\d\d\b|benchmarks/|gap_validation|second plant|"
+                     r"ROSS plant|independent plant|\bseeds? \d{4,}|\btrials? \d{4,}|"
+                     r"\b\d{5} run\b|\bcommit [0-9a-f]{7}|\b(?:since|until|on) [0-9a-f]{7}\b")
+
+
+def test_library_code_says_what_and_why_not_its_history():
+    # (the shipped datasets' provenance names its sources' commits: that is the point)
+    offenders = [f"{p.relative_to(PKG.parent)}:{i}: {line.strip()}"
+                 for p in PKG.rglob("*.py") if p.parent.name != "datasets"
+                 for i, line in enumerate(p.read_text().splitlines(), 1)
+                 if HISTORY.search(line)]
+    assert not offenders, "\n".join(offenders)
+
+
+def test_the_command_line_sets_no_environment_when_imported():
+    """Thread limits are the command's, set in ``main()``: importing the CLI (as a test
+    or an application does) leaves the process's environment alone."""
+    tree = ast.parse((PKG / "cli.py").read_text())
+    top = [n for n in tree.body if not isinstance(n, (ast.FunctionDef, ast.ClassDef))]
+    assert not any("environ" in ast.unparse(n) for n in top)
+
+
+def test_warnings_are_caught_by_kind_not_silenced_wholesale():
+    offenders = [f"{p.relative_to(PKG.parent)}:{i}"
+                 for p in PKG.rglob("*.py")
+                 for i, line in enumerate(p.read_text().splitlines(), 1)
+                 if re.search(r"simplefilter\(\s*[\"']ignore[\"']\s*\)", line)]
+    assert not offenders, offenders
 
 
 #: the calls that write a file

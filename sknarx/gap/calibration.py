@@ -15,186 +15,29 @@ import dataclasses
 import itertools
 import logging
 import math
-import os
-import warnings
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-from ..rotor import RotorBearingSimulator, RotorParameters, SimulationDivergenceError
-from .features import record_features, stack_features
+from ..rotor import SimulationDivergenceError
 from .gapmap import (
     compare,
     fast_residual,
     feature_layout,
     gap_statistic,
     model_tol,
+    tolerances,
     whirl_layout,
     whirl_tol,
 )
 from .jacobian import SecantJacobian, SettledStop
+from .sweep_model import NUISANCE, SweepModel
 
-__all__ = ["NUISANCE", "Calibration", "SweepModel", "calibrate"]
+__all__ = ["Calibration", "calibrate", "heldout_gap"]
 
 logger = logging.getLogger(__name__)
-
-#: name -> (lower, upper, scale, start)
-NUISANCE = {
-    "unbalance_scale": (0.7, 1.4, "lin", 1.0),
-    "unbalance_phase": (-np.pi, np.pi, "lin", 0.0),
-    "stiffness_scale": (0.85, 1.15, "lin", 1.0),
-    "damping_scale": (0.6, 1.6, "lin", 1.0),
-}
-NUISANCE_UNITS = {"unbalance_scale": "-", "unbalance_phase": "rad", "stiffness_scale": "-",
-                  "damping_scale": "-"}
-
-
-_POOL = None
-
-
-def _pool():
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=max(1, min(2, os.cpu_count() or 1)))
-    return _POOL
-
-
-@dataclass
-class SweepModel:
-    """How to simulate the measured experiment: speeds, sampling, channels, windows."""
-
-    base: RotorParameters
-    fs: float
-    n_samples: int
-    channels: tuple
-    transient_s: float = 0.5
-    seed: int = 0
-    settle_s: float = 0.0  # simulated and discarded before each record (0: from rest)
-    # speed (rad/s) -> (q, v): each speed's run continues a settled run from ``lead_s``
-    # before its record instead of settling from rest (see ``warmed``; None: never)
-    warm: dict | None = None
-    lead_s: float | None = 0.3
-    # the integration step: h |lambda|max <= step_factor (see RotorBearingSimulator)
-    step_factor: float = 2.0
-
-    def params(self, nuis) -> RotorParameters:
-        su, ph, sk, sc = nuis
-        b = self.base
-        return b.with_unbalance_scaled(su).replace(
-            unbalance_phase=b.unbalance_phase + ph, k1=b.k1 * sk, k2=b.k2 * sk,
-            c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc,
-            c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
-        )
-
-    def warmed(self, speeds, nuis, effects=()) -> SweepModel:
-        """This model with every speed's run continuing the settled run of the rotor
-        ``(nuis, effects)``: ``lead_s`` seconds of settling instead of ``settle_s``.
-
-        A local search moves the parameters a little: its runs start near their own
-        steady state and the short lead lets the small difference decay (the slow
-        modes are the least excited ones). Every run of one warmed model starts from
-        the same states, so its residual is a smooth function of the parameters.
-        Records that start with a transient (``settle_s`` 0) are not warmed: their
-        start from rest is part of what is compared.
-        """
-        if self.lead_s is None or self.settle_s <= self.lead_s:
-            return self
-        sim = self._simulator(nuis, effects, speeds)
-
-        def one(w):
-            return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
-                                            lead=self.lead_s)
-
-        return dataclasses.replace(self, warm=dict(_pool().map(one, speeds)))
-
-    def _simulator(self, nuis, effects, speeds):
-        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed,
-                                    step_factor=self.step_factor)
-        # build once, before the threads share it: the setup and each speed's step
-        _ = sim._setup
-        for w in speeds:
-            sim.substeps(self.fs, float(w))
-        return sim
-
-    def records(self, speeds, nuis, effects=()):
-        """Simulated records at ``speeds``; the speeds run concurrently (the integrator
-        releases the GIL), which halves an evaluation on two cores."""
-        return _only(self._per_speed(speeds, [(nuis, effects)], lambda record: record))
-
-    def _per_speed(self, speeds, points, then):
-        """``then(record)`` of each speed's simulated record for each ``(nuis,
-        effects)`` point, computed in the thread that simulated it (so one thread's
-        post-processing overlaps the other's integration), in the order of ``speeds``.
-        Every point's speeds share the two threads' queue, so a thread that finishes
-        its last speed of one point starts on the next point instead of waiting for the
-        other's last speed (and a point's simulator is built while the last one runs).
-        Each point gets its list of results, or the first exception one of its speeds
-        raised."""
-        warm = self.warm or {}
-
-        def jobs():
-            # lazily: the pool starts on a point's speeds while the next is built
-            for nuis, effects in points:
-                try:
-                    sim = self._simulator(nuis, effects, speeds)
-                except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
-                    sim = exc
-                for w in speeds:
-                    yield sim, float(w)
-
-        def one(job):
-            sim, w = job
-            if isinstance(sim, Exception):
-                return sim
-            try:
-                # automatic step: halved if an effect's stiff contact makes it unstable
-                state = warm.get(w)
-                run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
-                                           settle=self.settle_s if state is None
-                                           else self.lead_s, state=state)
-                Y = np.column_stack([run[c] for c in self.channels])
-                return then((w, run["t"], Y))
-            except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
-                return exc
-
-        done = list(_pool().map(one, jobs()))
-        n = len(speeds)
-        out = []
-        for i in range(len(points)):
-            part = done[i * n:(i + 1) * n]
-            out.append(next((r for r in part if isinstance(r, Exception)), part))
-        return out
-
-    def features(self, speeds, nuis, effects=()):
-        """Order features of the simulated experiment as a DataFrame."""
-        keys, vals, ses, _ = self.feature_arrays(speeds, nuis, effects)
-        df = pd.DataFrame(keys, columns=["speed", "window", "channel", "feature"])
-        df["re"], df["im"], df["se"] = vals.real, vals.imag, ses
-        return df
-
-    def feature_arrays(self, speeds, nuis, effects=()):
-        return _only(self.feature_arrays_many(speeds, [(nuis, effects)]))
-
-    def feature_arrays_many(self, speeds, points):
-        """:meth:`feature_arrays` of several ``(nuis, effects)`` points, run together
-        (see :meth:`_per_speed`); a point whose simulation failed gets its exception
-        instead."""
-        channels = list(self.channels)
-        parts = self._per_speed(
-            speeds, points, lambda record: record_features(record, channels,
-                                                           self.transient_s))
-        return [p if isinstance(p, Exception) else stack_features(p) for p in parts]
-
-
-def _only(results):
-    """The one point's result of a batched call, or its exception raised."""
-    (out,) = results
-    if isinstance(out, Exception):
-        raise out
-    return out
 
 
 @dataclass
@@ -239,10 +82,17 @@ def _split_x(classes):
     return np.array(lo), np.array(hi), np.array(log), names, np.array(x0)
 
 
+def _physical(x, log) -> np.ndarray:
+    """Search-space values in physical units (the log-scaled ones from their log10)."""
+    vals = np.array(x, dtype=float)
+    vals[log] = 10.0 ** vals[log]
+    return vals
+
+
 def _decode(x, classes, log, combo=None):
     """Nuisance values and effect objects of a search vector; ``combo`` holds each
     class's discrete settings (e.g. a crack's station)."""
-    vals = np.where(log, 10.0 ** x, x)
+    vals = _physical(x, log)
     nuis = vals[: len(NUISANCE)]
     effects, i = [], len(NUISANCE)
     for c, cls in enumerate(classes):
@@ -307,7 +157,7 @@ def _measured_arrays(meas_feats, index):
 def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, max_nfev=20,
               diff_step=1e-3, n_probe=16, n_short=4, seed=0, probe_from=None,
               fixed=None, each_discrete=False, jacobian_refresh=None, probe_cache=None,
-              settled_sigma=None, probes_per_parameter=None):
+              settled_sigma=None, probes_per_parameter=None, rule=None):
     """Fit the nuisance parameters and the effects of ``classes`` on ``speeds``.
 
     The first ``starts`` entry (nuisance values, then effect values in search space)
@@ -328,16 +178,16 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     holds some of them (a pair keeps its leading effect's station); the best short run
     of each combination runs to convergence. Returns the calibration of the lowest
     converged cost or, with ``each_discrete``, a list of each combination's: the
-    training cost can barely tell stations apart where held-out speeds can (measured
-    in ``docs/gap.md``, the crack row), so the caller may choose among them as it
-    chooses among candidates. Each local run and each discrete setting's probes
-    continue the settled runs of their start when the model allows it (see
+    training cost can barely tell stations apart where held-out speeds can, so the
+    caller may choose among them as it chooses among candidates. Each local run and
+    each discrete setting's probes continue the settled runs of their start when the
+    model allows it (see
     :meth:`SweepModel.warmed`) instead of settling every evaluation from rest.
     ``jacobian_refresh`` (steps) makes the short runs' Jacobian a secant one, by forward
     differences only every so many steps and after a rejected step (see
     :class:`~sknarx.gap.jacobian.SecantJacobian`): they only rank basins; the converged
-    runs difference theirs at every step (a secant Jacobian left the held-out choice of
-    a crack's station to chance, see ``docs/gap.md``). None: forward differences
+    runs difference theirs at every step (a secant Jacobian leaves the held-out choice
+    of a crack's station to chance). None: forward differences
     throughout. ``probe_cache`` (a dict the caller keeps across calls on one model and
     one ``meas_feats``) remembers each probe's cost: probing the same points from the
     same start again (a pair's partner, then the pair) costs nothing.
@@ -347,7 +197,8 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     tolerances alone. ``probes_per_parameter`` caps the probes at that many per probed
     parameter, rounded up to a power of two (a Sobol sequence's balanced sizes): a
     clearance's one parameter needs no 64-point grid; None: ``n_probe`` whatever the
-    dimension.
+    dimension. ``rule``: the :class:`~sknarx.gap.VerdictRule` whose tolerances the
+    comparison applies (the default's when None).
     """
     from scipy.stats import qmc
 
@@ -357,6 +208,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     index = pd.MultiIndex.from_tuples(keys, names=["speed", "window", "channel", "feature"])
     Mc, se_m, tol, whirl = _measured_arrays(meas_feats, index)
     order_k, speed_idx, group_idx = feature_layout(index)
+    tols = tolerances(rule)
     size = 2 * len(keys)
     project = _projection(classes, keys, order_k, Mc, se_m)
     combos = _discrete_combos(classes, fixed)
@@ -365,8 +217,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         """The features at each of the points ``xs``, simulated together (probes and a
         difference Jacobian's columns are independent points)."""
         points = [_decode(x, classes, log, combo) for x in xs]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with np.errstate(all="ignore"):  # a diverging run's features overflow
             return sweep.feature_arrays_many(speeds, points)
 
     def compared(f, bases):
@@ -377,8 +228,9 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
                 raise f
             _, Sc, se_s, _ = f
             Sc, _, added = project(Sc, se_s)
-            rs = [fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx,
-                                model_tol=tol, whirl=b, offset=added) for b in bases]
+            rs = [fast_residual(Mc, Sc, se_m=se_m, se_s=se_s, order_k=order_k,
+                                speed_idx=speed_idx, group_idx=group_idx, model_tol=tol,
+                                whirl=b, offset=added, **tols) for b in bases]
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             rs = [np.full(size, 1e3) for _ in bases]
         return [r if np.all(np.isfinite(r)) else np.full(size, 1e3) for r in rs]
@@ -394,8 +246,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         # fraction of the settling per evaluation, and one smooth residual
         nuis, effects = _decode(x, classes, log, combo)
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with np.errstate(all="ignore"):
                 return model.warmed(speeds, nuis, effects)
         except (SimulationDivergenceError, ValueError, FloatingPointError):
             return model
@@ -405,8 +256,7 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
         cal = _calibration(x, classes, log, std, cost, success, combo)
         if project.active:
             nuis, effects = _decode(x, classes, log, combo)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with np.errstate(all="ignore"):
                 _, Sc, se_s, _ = model.feature_arrays(speeds, nuis, effects)
             _, vectors, _ = project(Sc, se_s)
             for i, cls in enumerate(classes):
@@ -425,10 +275,10 @@ def calibrate(model: SweepModel, meas_feats, speeds, classes=(), starts=None, ma
     # basins are probed and ranked in the channel basis and converged in the whirl
     # basis: there a disk's backward whirl is trusted only to the nominal model's own,
     # so a probe leads by where its ellipse happens to fall, and a rub's short runs
-    # from such probes stayed in a basin that the whirl basis itself scores worse than
-    # the one the channel basis leads to (docs/gap_validation.md, *Why the rubs
-    # went*). A probe's cost is kept in both (one simulation); probes alone (max_nfev
-    # 0, a partner's score) are the whirl basis's, as a converged fit's cost is.
+    # from such probes stay in a basin that the whirl basis itself scores worse than
+    # the one the channel basis leads to. A probe's cost is kept in both (one
+    # simulation); probes alone (max_nfev 0, a partner's score) are the whirl basis's,
+    # as a converged fit's cost is.
     bases = (whirl,) if whirl is None else (whirl, None)
     ranked_by = 0 if max_nfev == 0 or whirl is None else 1  # index into bases
     j0 = len(NUISANCE) if probe_from is None else probe_from
@@ -569,18 +419,19 @@ def _std(res, log, names):
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         sd = np.full(p, np.nan)
-    vals = np.where(log, 10.0 ** res.x, res.x)
+    vals = _physical(res.x, log)
     # log-space sigma -> physical sigma (delta method)
     sd = np.where(log, vals * np.log(10.0) * sd, sd)
     return {f"{a}.{b}": float(v) for (a, b), v in zip(names, sd, strict=True)}
 
 
-def heldout_gap(model: SweepModel, meas_feats, speeds, cal: Calibration, classes):
-    """Excess gap of a calibrated model on held-out speeds, with its comparison table."""
+def heldout_gap(model: SweepModel, meas_feats, speeds, cal: Calibration, classes,
+                rule=None):
+    """Excess gap of a calibrated model on held-out speeds, with its comparison table
+    (the tolerances ``rule``'s, the default's when None)."""
     nuis = np.array(list(cal.nuisance.values()))
     effects = cal.effects(classes)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with np.errstate(all="ignore"):
         sim = model.features(speeds, nuis, effects)
     # a fitted runout's vectors are the probes', not the rotor's: the comparison's
     # tolerances leave them out as the calibration's did
@@ -588,5 +439,5 @@ def heldout_gap(model: SweepModel, meas_feats, speeds, cal: Calibration, classes
     for e in effects:
         for ch, by_order in getattr(e, "order_vectors", dict)().items():
             vectors.setdefault(ch, {}).update(by_order)
-    cmp = compare(meas_feats[meas_feats.speed.isin(speeds)], sim, probe_vectors=vectors)
+    cmp = compare(meas_feats[meas_feats.speed.isin(speeds)], sim, rule, probe_vectors=vectors)
     return gap_statistic(cmp), cmp

@@ -3,18 +3,20 @@
 Each measured feature is compared with its simulated twin, normalised by a noise
 floor: ``z2 = |M - S|^2 / (se_M^2 + se_S^2 + (rtol |S|)^2)``, whose expectation is 2
 for a complex order vector when the two agree within noise (chi-square with two
-degrees of freedom) -- ``rtol`` (1 % by default) admits the model-form error no
+degrees of freedom). The tolerances are the verdict rule's
+(:class:`~sknarx.gap.VerdictRule`): ``rtol`` admits the model-form error no
 calibration removes, a measured ``model_tol`` column the nominal model's stated
-model-form error, and a harmonic (1/3x-3x) also agrees to ``HARMONIC_RTOL`` of the
-smaller of its two sizes. The *excess* ``max(z2 - 2, 0)`` is the gap that noise cannot
-explain; regions are runs of adjacent speeds where it is significant, ranked by
-their share of the total excess.
+model-form error, a harmonic (1/3x-3x) also agrees to ``harmonic_rtol`` of the smaller
+of its two sizes, and a non-synchronous line energy to ``line_sigmas`` of its standard
+errors. The *excess* ``max(z2 - 2, 0)`` is the gap that noise cannot explain; regions
+are runs of adjacent speeds where it is significant, ranked by their share of the
+total excess.
 
-Small phase offsets of the once-per-revolution reference are removed first: per
-speed step, the measured vectors are rotated by ``-k delta`` with ``delta`` the
-1x phase difference (bounded by ``max_offset_deg``), so a jittery keyphasor does
-not masquerade as a gap; then each channel's 2x and 3x follow that channel's own 1x
-phase error as far as its 1x tolerance admits (see ``_normalised``).
+Small phase offsets of the once-per-revolution reference are removed first: per speed
+step, the measured vectors are rotated by ``-k delta`` with ``delta`` the 1x phase
+difference (bounded by the rule's ``keyphasor_deg``), so a jittery keyphasor does not
+masquerade as a gap; then each channel's 2x and 3x follow that channel's own 1x phase
+error as far as its 1x tolerance admits (see ``_normalised``).
 """
 
 from __future__ import annotations
@@ -22,9 +24,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .features import ORDER_LABELS
+from ..orders import ORDER_LABELS
 
-__all__ = ["compare", "regions", "gap_statistic", "true_runs", "probe_offsets"]
+__all__ = ["compare", "regions", "gap_statistic", "true_runs", "probe_offsets",
+           "comparison_layout", "excess_of_residual", "fast_residual", "tolerances",
+           "HARMONIC_TOL"]
 
 
 def true_runs(mask, max_hole: int = 0) -> list[tuple[int, int]]:
@@ -43,21 +47,29 @@ def true_runs(mask, max_hole: int = 0) -> list[tuple[int, int]]:
 
 #: each synchronous feature's shaft order (the non-synchronous lines: 0)
 ORDER_K = {label: k for k, label in ORDER_LABELS.items()}
-NONSYNC_SIGMAS = 3.0
-
 
 #: the nominal model's own harmonics and lines (from the bearings' contact law, whose
-#: clearance, exponent and housing are uncertain) are trusted to within this share of
-#: their size: an effect must add more than the model's own harmonic to be seen
+#: clearance, exponent and housing are uncertain) are trusted to their own size, not
+#: beyond: an effect must add more than the model's own harmonic to be seen. A
+#: definition (the model's harmonic is the unit), not a tuned share
 HARMONIC_TOL = 1.0
 
-#: two derivations of one contact law agree on the size of its harmonics to tens of per
-#: cent, not to the measurement noise: on the independent ROSS plant with the true
-#: bearing clearance, the journals' 2x differ from sknarx's by 2-47 % (median ~25 %,
-#: docs/gap.md). A harmonic (1/3x, 1/2x, 2x, 3x) therefore agrees to within this share
-#: of the smaller of the measured and the simulated size -- the smaller, so that a
-#: candidate cannot widen its own tolerance by inflating its harmonics
-HARMONIC_RTOL = 0.3
+
+def _rule(rule):
+    """The verdict rule whose tolerances a comparison applies (the default's: None)."""
+    if rule is None:
+        from .rule import VerdictRule
+
+        return VerdictRule()
+    return rule
+
+
+def tolerances(rule) -> dict:
+    """The comparison's tolerances from a :class:`~sknarx.gap.VerdictRule` (the
+    default's: None), as :func:`fast_residual` takes them."""
+    rule = _rule(rule)
+    return {"rtol": rule.rtol, "keyphasor_deg": rule.keyphasor_deg,
+            "harmonic_rtol": rule.harmonic_rtol, "line_sigmas": rule.line_sigmas}
 
 
 def model_tol(meas: pd.DataFrame) -> np.ndarray:
@@ -143,15 +155,15 @@ def _whirl_whitened(r_x, r_y, var_x, var_y, mtol_x, mtol_y, tol_b, S_x, S_y):
     return (dp + dq) / np.sqrt(2.0), -1j * (dp - dq) / np.sqrt(2.0)
 
 
-def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                max_offset_deg, whirl=None, harmonic_rtol=HARMONIC_RTOL, offset=None):
+def _normalised(Mc, Sc, se_m, se_s, order_k, speed_idx, group_idx, rtol, keyphasor_deg,
+                harmonic_rtol, line_sigmas, model_tol=None, whirl=None, offset=None):
     """The one comparison kernel of :func:`compare` and :func:`fast_residual`:
     ``(M - S) / sigma`` per feature, complex, and the phase-aligned measured ``M``.
 
     Two phase alignments, each bounded by what it may absorb:
 
     * per speed step, the once-per-revolution reference's offset (the 1x phase
-      difference over all channels, at most ``max_offset_deg``), ``k`` times for order
+      difference over all channels, at most ``keyphasor_deg``), ``k`` times for order
       ``k``;
     * per channel (``group_idx``: speed step, window and channel), the integer
       harmonics (2x, 3x) by ``k`` times that channel's own remaining 1x phase
@@ -171,7 +183,7 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
     would widen that journal's 1x tolerance six-fold and its 2x tolerance to 0.3 of the
     runout's 2x, hiding from the comparison what the rotor beside the runout does.
     """
-    lim = np.radians(max_offset_deg)
+    lim = np.radians(keyphasor_deg)
     is1 = order_k == 1.0
     n_speeds = int(speed_idx.max()) + 1 if speed_idx.size else 0
     delta = np.angle(_per_group(speed_idx[is1], Mc[is1] * np.conj(Sc[is1]), n_speeds))
@@ -192,7 +204,7 @@ def _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rt
         M = np.where(order_k >= 2.0, v + (M - v) * np.exp(-1j * order_k * turn), M)
     nons = order_k == 0.0
     harmonic = ~nons & ~is1
-    noise = np.where(nons, (NONSYNC_SIGMAS * se_m) ** 2 + (NONSYNC_SIGMAS * se_s) ** 2,
+    noise = np.where(nons, (line_sigmas * se_m) ** 2 + (line_sigmas * se_s) ** 2,
                      se_m**2 + se_s**2)
     var = noise + (rtol * np.abs(R)) ** 2 + tol**2
     var = var + np.where(harmonic, (harmonic_rtol * np.minimum(np.abs(M - v), np.abs(R)))
@@ -234,59 +246,73 @@ def probe_offsets(index: pd.MultiIndex, vectors: dict | None) -> np.ndarray | No
     return out
 
 
-def compare(meas: pd.DataFrame, sim: pd.DataFrame, rtol: float = 0.01,
-            max_offset_deg: float = 5.0, harmonic_rtol: float = HARMONIC_RTOL,
-            probe_vectors: dict | None = None) -> pd.DataFrame:
-    """Feature-by-feature gap between measured and simulated order features.
-
-    ``harmonic_rtol`` is the harmonics' share of model-form tolerance
-    (:data:`HARMONIC_RTOL`); two records of one rotor (:mod:`sknarx.gap.passes`) have no
-    model form between them and compare with 0.
-
-    A ``model_tol`` column in ``meas`` (m) widens each feature's tolerance by the
-    model-form error the nominal model is allowed (see ``diagnosis``); harmonics agree
-    to within ``HARMONIC_RTOL`` and are compared in phase with their channel's 1x as far
-    as its tolerance admits (see :func:`fast_residual`'s kernel, shared). With a
-    ``whirl_tol`` column (m) each probe pair's 1x is compared in its forward and
-    backward whirl, the 1x model-form tolerance on the forward whirl only (see
-    ``_whirl_whitened``); the table stays one row per channel.
-
-    ``probe_vectors`` (``{channel: {order: complex}}``, m) are constant vectors ``sim``
-    holds that are no response of the rotor -- a fitted probe runout's: the tolerances
-    that scale with the simulation are taken of the rotor's part alone (see
-    ``_normalised``), so that a large runout does not widen them.
-    """
+def comparison_layout(meas: pd.DataFrame, sim: pd.DataFrame, rule=None,
+                      probe_vectors: dict | None = None) -> dict:
+    """What :func:`compare` computes once for a pair of feature tables: the measured and
+    simulated vectors ``M`` and ``S`` aligned row by row, each row's expected z2 under
+    noise (``expect``: 2 for an order vector, 1 for a line energy), the rows' ``index``
+    and the keyword arguments of :func:`fast_residual` but the two vectors."""
     key = ["speed", "window", "channel", "feature"]
     m = meas.set_index(key)
     s = sim.set_index(key).reindex(m.index)
-    Mc = m["re"].to_numpy() + 1j * m["im"].to_numpy()
-    Sc = s["re"].to_numpy() + 1j * s["im"].to_numpy()
     order_k, speed_idx, group_idx = feature_layout(m.index)
-    tol = model_tol(m)
-    d, M = _normalised(Mc, m["se"].to_numpy(), Sc, s["se"].to_numpy(), order_k, speed_idx,
-                       group_idx, tol, rtol, max_offset_deg,
-                       whirl_layout(m.index, whirl_tol(m)), harmonic_rtol,
-                       probe_offsets(m.index, probe_vectors))
+    kwargs = {"se_m": m["se"].to_numpy(), "se_s": s["se"].to_numpy(), "order_k": order_k,
+              "speed_idx": speed_idx, "group_idx": group_idx, **tolerances(rule),
+              "model_tol": model_tol(m), "whirl": whirl_layout(m.index, whirl_tol(m)),
+              "offset": probe_offsets(m.index, probe_vectors)}
+    return {"M": m["re"].to_numpy() + 1j * m["im"].to_numpy(),
+            "S": s["re"].to_numpy() + 1j * s["im"].to_numpy(), "index": m.index,
+            "expect": np.where(order_k == 0.0, 1.0, 2.0), "kwargs": kwargs}
+
+
+def excess_of_residual(d: np.ndarray, layout: dict) -> np.ndarray:
+    """Each feature's excess ``max(z2 - expect, 0)`` from :func:`fast_residual`'s
+    residual ``d`` (real parts, then imaginary parts) and :func:`comparison_layout`."""
+    n = d.size // 2
+    return np.clip(d[:n] ** 2 + d[n:] ** 2 - layout["expect"], 0.0, None)
+
+
+def compare(meas: pd.DataFrame, sim: pd.DataFrame, rule=None,
+            probe_vectors: dict | None = None) -> pd.DataFrame:
+    """Feature-by-feature gap between measured and simulated order features.
+
+    The tolerances are ``rule``'s (:class:`~sknarx.gap.VerdictRule`; the default's when
+    None); two records of one rotor (:mod:`sknarx.gap.passes`) have no model form
+    between them and compare under a rule whose ``rtol`` and ``harmonic_rtol`` are 0.
+
+    A ``model_tol`` column in ``meas`` (m) widens each feature's tolerance by the
+    model-form error the nominal model is allowed (:mod:`sknarx.gap.tolerance`);
+    harmonics agree to within ``harmonic_rtol`` and are compared in phase with their
+    channel's 1x as far as its tolerance admits (``_normalised``). With a ``whirl_tol``
+    column (m) each probe pair's 1x is compared in its forward and backward whirl, the
+    1x model-form tolerance on the forward whirl only (``_whirl_whitened``); the table
+    stays one row per channel.
+
+    ``probe_vectors`` (``{channel: {order: complex}}``, m) are constant vectors ``sim``
+    holds that are no response of the rotor -- a fitted probe runout's: the tolerances
+    that scale with the simulation are taken of the rotor's part alone, so that a large
+    runout does not widen them.
+    """
+    layout = comparison_layout(meas, sim, rule, probe_vectors)
+    Mc, Sc = layout["M"], layout["S"]
+    d, M = _normalised(Mc, Sc=Sc, **layout["kwargs"])
     z2 = np.abs(d) ** 2
-    expect = np.where(order_k == 0.0, 1.0, 2.0)
-    out = m.index.to_frame(index=False)
+    out = layout["index"].to_frame(index=False)
     out["measured"] = np.abs(Mc)
     out["simulated"] = np.abs(Sc)
     out["gap"] = np.abs(M - Sc)
     out["z2"] = z2
-    out["excess"] = np.clip(z2 - expect, 0.0, None)
+    out["excess"] = np.clip(z2 - layout["expect"], 0.0, None)
     return out
 
 
-def fast_residual(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, rtol=0.01,
-                  max_offset_deg=5.0, model_tol=None, whirl=None, offset=None):
+def fast_residual(Mc, Sc, **kwargs):
     """Normalised residuals of aligned feature arrays (the calibration's inner loop), as
-    :func:`compare` computes them; the layout from :func:`feature_layout`, ``model_tol``
-    (m) per feature, ``whirl`` the probe pairs from :func:`whirl_layout` (None: channel
-    by channel), ``offset`` the constant probe vectors ``Sc`` holds (complex, m, per
-    feature; see :func:`probe_offsets`)."""
-    d = _normalised(Mc, se_m, Sc, se_s, order_k, speed_idx, group_idx, model_tol, rtol,
-                    max_offset_deg, whirl, offset=offset)[0]
+    :func:`compare` computes them, real parts then imaginary parts; ``kwargs`` as
+    :func:`comparison_layout` gives them (``model_tol`` in m per feature, ``whirl`` the
+    probe pairs from :func:`whirl_layout` or None, ``offset`` the constant probe
+    vectors ``Sc`` holds, complex, m, per feature, or None)."""
+    d = _normalised(Mc, Sc=Sc, **kwargs)[0]
     return np.concatenate([d.real, d.imag])
 
 
@@ -295,8 +321,9 @@ def gap_statistic(cmp: pd.DataFrame) -> float:
     return float(cmp["excess"].sum())
 
 
-def regions(cmp: pd.DataFrame, z_threshold: float = 9.0) -> list[dict]:
-    """Runs of adjacent speeds with a significant gap, ranked by share of the total excess."""
+def regions(cmp: pd.DataFrame, z_threshold: float) -> list[dict]:
+    """Runs of adjacent speeds whose features' z2 exceeds ``z_threshold`` (the rule's
+    :attr:`~sknarx.gap.VerdictRule.region_z2`), ranked by share of the total excess."""
     total = cmp["excess"].sum()
     out = []
     if total <= 0:

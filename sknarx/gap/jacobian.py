@@ -2,12 +2,11 @@
 then, Broyden's rank-one updates in between.
 
 Each forward-difference Jacobian of a calibration's residual costs one simulated sweep
-per parameter; on a 19-speed diagnosis they were two thirds of the time (profile in
-``docs/gap.md``). A trust-region step already evaluates the residual at the new point;
-Broyden's update (Dennis & Schnabel, *Numerical Methods for Unconstrained
-Optimization*, ch. 8) turns that one evaluation into a secant correction of the last
-Jacobian, and a fresh difference Jacobian every ``refresh`` steps keeps the secant
-drift in check.
+per parameter, two thirds of a 19-speed diagnosis's time. A trust-region step already
+evaluates the residual at the new point; Broyden's update (Dennis & Schnabel,
+*Numerical Methods for Unconstrained Optimization*, ch. 8) turns that one evaluation
+into a secant correction of the last Jacobian, and a fresh difference Jacobian every
+``refresh`` steps keeps the secant drift in check.
 """
 
 from __future__ import annotations

@@ -20,27 +20,26 @@ the first pass plays the measurement and the second its twin, each with its own 
 errors, and the reference's offset is removed per speed step. A rig does not repeat a
 vector to its noise: between two records of an unchanged rotor its temperature, speed
 control and electronics drift (the RK-4 rig's repeated acquisitions differ by 0.2-0.7 %
-of a 1x beyond their noise, ``benchmarks/bench_gap_passes_real.py``). So each
-difference is first shrunk by a dead band, ``pass_rtol`` (1 %) of the vectors' mean size
-plus, where a step moved, the first pass's slope over speed times the move; only what
-is left counts, in units of the noise. Where the passes agree to within the band, that
+of a 1x beyond their noise). So each difference is first shrunk by a dead band, the
+rule's ``rtol`` (1 %) of the vectors' mean size plus, where a step moved, the first
+pass's slope over speed times the move; only what is left counts, in units of the
+noise. Where the passes agree to within the band, that
 ``z2`` is never more than the noise's own, a chi-square with two degrees of freedom per
 vector, whatever the sweep holds and however much of the band the rig's drift uses. The
 test is the sum of ``z2`` over the shaft orders (1/3x to 3x) of the steps both passes
 hold, as the normal deviate of equal upper tail under noise alone (the Wilson-Hilferty
 transform of a chi-square with two degrees of freedom per vector; ``statistic``),
-against ``pass_floor_sigmas``. That floor is the larger of a normal's one-sided 1 %
-point and the 99 % point of effect-free pairs of passes, measured and frozen like the
-diagnosis's own floor (``benchmarks/bench_gap_passes.py``). The first form of the test
-added the tolerance to each feature's variance instead: a difference inside the
-tolerance then still counted as excess over the noise, and on the RK-4 rig's unchanged
-repeats it called 22 of 285 pairs changed (``docs/gap.md``). The non-synchronous line
-energy is listed, one sum over its bands per step and channel, but not tested: how much
-one line estimate scatters from record to record is not known from a record.
+against the normal point of the rule's false-alarm level
+(:attr:`~sknarx.gap.VerdictRule.pass_sigmas`). A dead band, not a variance: a
+difference inside a tolerance added to the variance still counts as excess over the
+noise, and on the RK-4 rig's unchanged repeats that called 22 of 285 pairs changed.
+The non-synchronous line energy is listed, one sum over its bands per step and channel,
+but not tested: how much one line estimate scatters from record to record is not known
+from a record.
 
-Two speed steps are the same step when their speeds agree to ``pass_speed_rtol``; a step
-that a rig's speed control placed a little apart in the second pass widens the band as
-above.
+Two speed steps are the same step when their speeds agree to the rule's ``speed_rtol``;
+a step that a rig's speed control placed a little apart in the second pass widens the
+band as above.
 """
 
 from __future__ import annotations
@@ -50,11 +49,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from .core import order_mean_z2
-from .features import free_response_decay, is_nonsync, order_features
+from ..orders import free_response_decay, is_nonsync, order_features
 from .gapmap import compare, regions
 from .measured import check_measured
-from .settings import DiagnosisSettings
 
 __all__ = ["PassComparison", "compare_pass_features", "compare_passes",
            "sigmas_over_noise"]
@@ -78,13 +75,15 @@ class PassComparison:
         The shaft orders' summed ``z2`` as the normal deviate of equal upper tail under
         noise alone.
     floor : float
-        What it is tested against (``pass_floor_sigmas``).
+        What it is tested against (the rule's ``pass_sigmas``).
     speed_pairs : list of (float, float)
         The matched steps' speeds (rad/s): first pass, second pass.
     unmatched : dict
         Speeds (rad/s) of each pass that the other pass does not hold.
     band_rtol : float
-        The dead band's share of each vector's size (``pass_rtol``).
+        The dead band's share of each vector's size (the rule's ``rtol``).
+    region_z2 : float
+        The z2 above which a feature counts toward a region where the passes differ.
     """
 
     table: pd.DataFrame
@@ -93,6 +92,7 @@ class PassComparison:
     speed_pairs: list
     unmatched: dict
     band_rtol: float = 0.01
+    region_z2: float = 9.21
 
     @property
     def changed(self) -> bool:
@@ -123,8 +123,8 @@ class PassComparison:
             "n_features": len(self.table), "n_steps": len(self.speed_pairs),
             "speed_pairs": [[float(a), float(b)] for a, b in self.speed_pairs],
             "unmatched_speeds": {k: [float(w) for w in v] for k, v in self.unmatched.items()},
-            "by_order": order_mean_z2(self.table),
-            "where": regions(self.table),
+            "by_order": _by_order(self.table),
+            "where": regions(self.table, self.region_z2),
             "largest": [{"speed": float(r.speed), "window": r.window,
                          "channel": r.channel, "feature": r.feature,
                          "first_m": float(r.measured), "second_m": float(r.simulated),
@@ -136,6 +136,13 @@ class PassComparison:
                     "equal upper tail under noise alone, against the floor; line energies "
                     "listed, not tested",
         }
+
+
+def _by_order(table: pd.DataFrame) -> dict:
+    """The 1x, 2x and 3x rows' mean ``z2`` with their number."""
+    rows = table[table["feature"].isin(("1x", "2x", "3x"))].groupby("feature")["z2"]
+    return {k: {"mean_z2": float(m), "n": int(n)}
+            for k, m, n in zip(rows.mean().index, rows.mean(), rows.size(), strict=True)}
 
 
 def _tested(table: pd.DataFrame) -> pd.DataFrame:
@@ -175,8 +182,8 @@ def _lines_summed(features):
     """The features with each step's, window's and channel's non-synchronous bands summed
     into one line energy (``nonsync``, the root sum of squares). A fixed-frequency line
     near a band's edge splits between the two bands differently from record to record
-    (on ROSS's trial 51048 a 50 Hz pickup at 1.485x moved a tenth of its energy across
-    1.5x between passes); the sum does not. The white floor is one per channel, every
+    (a 50 Hz pickup at 1.485x can move a tenth of its energy across 1.5x between
+    passes); the sum does not. The white floor is one per channel, every
     band's."""
     nons = features["feature"].map(is_nonsync).to_numpy(dtype=bool)
     bands = features[nons]
@@ -234,8 +241,14 @@ def _speed_tolerance(first, moved):
     return tol
 
 
-def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
-                   settings: DiagnosisSettings | None = None) -> PassComparison:
+def _rule(rule):
+    from .rule import VerdictRule
+
+    return rule or VerdictRule()
+
+
+def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None, rule=None,
+                   transient_s: float = 0.5) -> PassComparison:
     """Compare two passes of one stepped sweep, model-free.
 
     Parameters
@@ -246,9 +259,11 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
         the coast-down after it. Steps one pass lacks are left out.
     channels : sequence of str, optional
         Channels to compare (every DOF column of the first pass by default).
-    settings : DiagnosisSettings, optional
-        ``pass_floor_sigmas``, ``pass_speed_rtol``, ``pass_rtol`` and ``transient_s``
-        (the frozen defaults by default).
+    rule : VerdictRule, optional
+        Its ``false_alarm`` (the test's level), ``rtol`` (the dead band) and
+        ``speed_rtol`` (the same step); the default's when None.
+    transient_s : float, default=0.5
+        The window kept apart at the start of records that start with a transient.
 
     Returns
     -------
@@ -271,7 +286,7 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     >>> compare_passes(one_pass(5e-6, 1), one_pass(0.0, 2)).changed
     True
     """
-    settings = settings or DiagnosisSettings()
+    rule = _rule(rule)
     first, info = check_measured(first, channels)
     channels = info["channels"]
     try:
@@ -283,7 +298,7 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     if abs(info2["fs"] - info["fs"]) > 1e-6 * info["fs"]:
         raise ValueError(f"The passes are sampled at {info['fs']:g} Hz and "
                          f"{info2['fs']:g} Hz: resample one to the other's rate.")
-    match = _matched(info["speeds"], info2["speeds"], settings.pass_speed_rtol)
+    match = _matched(info["speeds"], info2["speeds"], rule.speed_rtol)
     # one record length for both: a longer record's features are more precise, and
     # the standard errors would say so, but the steps then differ in what they average
     n = min(info["n_samples"], info2["n_samples"])
@@ -292,17 +307,17 @@ def compare_passes(first: pd.DataFrame, second: pd.DataFrame, channels=None,
     second = second[second.speed.isin(list(match))].groupby(
         "speed", group_keys=False).head(n)
     decay = free_response_decay(first, channels)
-    transient_s = settings.transient_s if decay["transient"].median() >= 0.5 else 0.0
+    transient_s = transient_s if decay["transient"].median() >= 0.5 else 0.0
     got = compare_pass_features(_lines_summed(order_features(first, channels, transient_s)),
                                 _lines_summed(order_features(second, channels, transient_s)),
-                                settings)
+                                rule)
     return replace(got, unmatched={
         "first": sorted(set(info["speeds"]) - set(match.values())),
         "second": sorted(set(info2["speeds"]) - set(match))})
 
 
 def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
-                          settings: DiagnosisSettings | None = None) -> PassComparison:
+                          rule=None) -> PassComparison:
     """Compare two passes of one sweep given as order features, model-free: the kernel
     of :func:`compare_passes`, for passes already order-tracked (e.g. a rig's 1x Bode
     vectors of a run-up and of its coast-down).
@@ -313,9 +328,9 @@ def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
         One row per feature: ``speed`` (rad/s), ``window``, ``channel``, ``feature``
         (``'1x'``, ``'2x'``, ...), ``re``, ``im`` and ``se`` (each component's standard
         error), in one unit for both (m, or the data's own: the test reads ratios).
-        Steps within ``pass_speed_rtol`` of each other are the same step.
-    settings : DiagnosisSettings, optional
-        ``pass_floor_sigmas``, ``pass_speed_rtol`` and ``pass_rtol``.
+        Steps within the rule's ``speed_rtol`` of each other are the same step.
+    rule : VerdictRule, optional
+        Its ``false_alarm``, ``rtol`` and ``speed_rtol`` (the default's when None).
 
     Returns
     -------
@@ -334,13 +349,13 @@ def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
     >>> compare_pass_features(bode([1.0, 2.0]), bode([1.2, 2.0])).changed
     True
     """
-    settings = settings or DiagnosisSettings()
+    rule = _rule(rule)
     need = {*_KEY, "re", "im", "se"}
     missing = sorted((need - set(first.columns)) | (need - set(second.columns)))
     if missing:
         raise ValueError(f"Pass features need the columns {', '.join(missing)}.")
     speeds1, speeds2 = sorted(first["speed"].unique()), sorted(second["speed"].unique())
-    match = _matched(speeds1, speeds2, settings.pass_speed_rtol)
+    match = _matched(speeds1, speeds2, rule.speed_rtol)
     f1 = first[first["speed"].isin(list(match.values()))].reset_index(drop=True)
     f2 = second[second["speed"].isin(list(match))].copy()
     f2["speed"] = f2["speed"].map(match)
@@ -349,13 +364,12 @@ def compare_pass_features(first: pd.DataFrame, second: pd.DataFrame,
     f2 = f2.set_index(_KEY).reindex(pd.MultiIndex.from_frame(f1[_KEY])).reset_index()
     # the two records of one rotor have no model form between them: the variance is
     # their noise alone, and what a rig does not repeat is a dead band, not variance
-    table = compare(f1, f2, rtol=0.0, harmonic_rtol=0.0)
+    table = compare(f1, f2, replace(rule, rtol=0.0, harmonic_rtol=0.0))
     size = (table["measured"].to_numpy() + table["simulated"].to_numpy()) / 2.0
-    table = _beyond_band(table, settings.pass_rtol * size + slope_band)
+    table = _beyond_band(table, rule.rtol * size + slope_band)
     return PassComparison(
-        table=table, statistic=sigmas_over_noise(table),
-        floor=settings.pass_floor_sigmas,
+        table=table, statistic=sigmas_over_noise(table), floor=rule.pass_sigmas,
         speed_pairs=sorted((w1, w2) for w2, w1 in match.items()),
         unmatched={"first": sorted(set(speeds1) - set(match.values())),
                    "second": sorted(set(speeds2) - set(match))},
-        band_rtol=settings.pass_rtol)
+        band_rtol=rule.rtol, region_z2=rule.region_z2)

@@ -67,12 +67,13 @@ def check_readings(readings, base: RotorParameters | None = None) -> dict[str, d
 
 
 def reading_contenders(ranking: list, k: int) -> tuple:
-    """The effects of the ``k`` best single candidates of ``ranking`` (model error alone
-    and pairs aside): those fitted again in every other reading. A pair of them is
-    formed by the search in that reading where its lead leaves a gap."""
+    """The effects of the ``k`` best single candidates of ``ranking`` (candidates or
+    their document entries; model error alone and pairs aside): those fitted again in
+    every other reading. A pair of them is formed by the search in that reading where
+    its lead leaves a gap."""
     out = []
     for r in ranking:
-        e = r["effect"]
+        e = r["effect"] if isinstance(r, dict) else r.label
         if isinstance(e, str) and e not in out:
             out.append(e)
         if len(out) == k:

@@ -18,7 +18,7 @@ class GapDiagnosis(Mapping):
     figures and reports are drawn from ride along as attributes and are not part of the
     document. Nothing is written by the diagnosis: the caller writes the report
     (:func:`sknarx.gap.report.write_gap_outputs`,
-    :func:`sknarx.gap.bode_report.write_bode_outputs`).
+    :func:`sknarx.bode.write_bode_outputs`).
 
     Parameters
     ----------
@@ -37,6 +37,9 @@ class GapDiagnosis(Mapping):
     curves : dict
         Front-end arrays for figures (the order-domain front end: the binned record and
         the nominal, calibrated and corrected 1x curves, in m).
+    verdict : Verdict, optional
+        The verdict rule's typed answer (:class:`~sknarx.gap.candidate.Verdict`): the
+        named or judged candidate and the tests it failed.
 
     Examples
     --------
@@ -51,6 +54,7 @@ class GapDiagnosis(Mapping):
     tables: dict = field(default_factory=dict)
     base: Any = None
     curves: dict = field(default_factory=dict)
+    verdict: Any = None
 
     def __getitem__(self, key: str):
         return self.document[key]

@@ -48,7 +48,7 @@ from ..orders import harmonic_basis
 from ..rotor.matrices import DOF_INDEX
 from ..rotor.parameters import RotorParameters
 from ..rotor.simulator import RotorBearingSimulator
-from .calibration import _pool
+from .sweep_model import _pool
 
 __all__ = ["UpdatingParameter", "DEFAULT_PARAMETERS", "linear_1x", "nonlinear_1x",
            "update_nominal_model", "UpdateResult"]

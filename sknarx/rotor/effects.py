@@ -446,8 +446,7 @@ class BreathingCrack(Effect):
     element_scale - depth / 4``: the open share ``h`` averages 1/2 and the crack's
     direction turns through both planes), so that the depth moves the breathing (2x,
     3x) and leaves the 1x to ``mean_scale``: searched as depth and closed stiffness, the
-    two trade along a narrow valley that short local runs do not follow (measured in
-    ``docs/gap.md``).
+    two trade along a narrow valley that short local runs do not follow.
 
     Examples
     --------
@@ -590,7 +589,7 @@ class SupportAnisotropy(Effect):
     a journal orbiting about its static sag unloads and stiffens the contact every
     revolution, and what a soft pedestal takes depends on that orbit -- a linear series
     spring about the static sag overstated it up to sevenfold at a bearing whose orbit
-    exceeds its sag (``docs/gap.md``). The housing's mass gives the support a resonance
+    exceeds its sag. The housing's mass gives the support a resonance
     of its own, near ``sqrt((k_H + k_p) / mass)``.
 
     Where the journal probes are fixed matters as soon as the housing moves:
@@ -783,8 +782,9 @@ class ClearanceChange(Effect):
 
     Why the contact stiffness moves with it: a larger clearance softens a bearing's
     1x stiffness as a lower contact stiffness does, so a nominal update made without
-    the clearance in the model lowers the contact stiffness to follow that 1x (on the
-    independent plants by 30-50 %). The clearance alone, fitted on top of that
+    the clearance in the model lowers the contact stiffness to follow that 1x (by
+    30-50 % on rotors derived apart from this one). The clearance alone, fitted on top
+    of that
     update, then needs less clearance than the truth and leaves the harmonics half
     explained. ``contact_scale`` lets the candidate hand the softening back: the
     two are estimated together, as one change of the bearings.
@@ -879,7 +879,7 @@ class ProbeRunout(Effect):
     units = {"amplitude": "m", "phase": "rad", "vectors": "m"}
     signature = "a constant 1x (or 2x) vector per probe, dominant at low speed"
     # a bow fixed over the sweep is this runout plus a change of the disks' unbalance
-    # (benchmarks/bench_bow_equivalence.py: within 2-3 % of its 1x on every plant family);
+    # (to 2-3 % of its 1x on rotors derived apart from this one: docs/decisions.md);
     # a relaxing one adds a smooth drift of 1x over a sweep whose speeds only rise
     alike = ("a bent shaft: a bow fixed over the sweep is such a runout plus a change of the "
              "disks' unbalance, and a bow relaxing as the rotor warms or cools adds a slow "

@@ -80,8 +80,8 @@ class RotorParameters:
         Share (0-1) of ``c_d1`` (``c_d2``) acting from disk O1 (O2) to the frame
         rather than across its shaft segment (0). The paper does not say where its
         disk dampers act: 0 is the reading of ``docs/rotor_model.md``, 1 an absolute
-        damper at the disk (external damping, as a second derivation and the ROSS
-        model read it). Where it acts moves the journals' 1x phase by tens of
+        damper at the disk (external damping, as other readings of the paper take
+        it). Where it acts moves the journals' 1x phase by tens of
         per cent, so model updating fits it.
     tilt_share_O : float
         Share (0-1) of ``c_O1`` (``c_O2``) acting on disk O1's (O2's) tilt to the frame,

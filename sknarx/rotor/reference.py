@@ -1,7 +1,7 @@
 """The same equations of motion as a vectorised-NumPy right-hand side for SciPy.
 
 Used as an independent cross-check of the compiled integrator (accuracy test)
-and as the ``solve_ivp`` peer in ``benchmarks/bench_simulator.py``. Constant speed
+and as the ``solve_ivp`` peer of the simulator's speed benchmark. Constant speed
 only; effects are not included.
 """
 

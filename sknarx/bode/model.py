@@ -17,15 +17,16 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..rotor.runup import runup_order_response, transient_end_rpm
-from .bode import RPM
+from .records import RPM
 
-__all__ = ["Candidate", "OrderModel", "RTOL", "TRANSIENT_TOL", "complex_pairs",
-           "fit_bearings", "predict", "solve_real_linear", "z2_of"]
+__all__ = ["Candidate", "OrderModel", "TRANSIENT_TOL", "complex_pairs", "fit_bearings",
+           "predict", "solve_real_linear", "z2_of"]
 
-RTOL = 0.02  # model-form tolerance of a lumped linear rotor
-# a crossed mode's free vibration below this share of its size counts as died out: half
-# the model-form tolerance, so the switch to the steady response is not seen in a fit
-TRANSIENT_TOL = RTOL / 2
+#: a crossed mode's free vibration below this share of its size counts as died out: a
+#: simulation accuracy, half the lumped linear rotor's model-form tolerance
+#: (:data:`sknarx.gap.rule.ORDER_DOMAIN_RULE`'s ``rtol``), so the switch from the
+#: simulated run-up to the steady response is not seen in a fit
+TRANSIENT_TOL = 0.01
 
 
 class OrderModel:
@@ -38,12 +39,15 @@ class OrderModel:
     the free vibration of every crossed mode of *this* rotor has decayed below
     ``TRANSIENT_TOL`` (:func:`~sknarx.rotor.runup.transient_end_rpm`); above it (and
     without ``runup``) from steady-state responses, which are then exact to that level.
+    ``rtol``: the share of its size to which the model's 1x is trusted (the fits'
+    weights and :func:`z2_of`).
     """
 
-    def __init__(self, rotor, probe, runup=None):
+    def __init__(self, rotor, probe, runup=None, rtol=0.02):
         self.rotor = rotor
         self.probe = probe
         self.runup = runup
+        self.rtol = rtol  # the 1x's model-form tolerance, a share of its size
 
     def basis(self, speeds, kx, ky, cx, cy, angle=0.0):
         """Probe response to unit unbalances; the probe reads the displacement along
@@ -135,14 +139,15 @@ def predict(model, cand, p, speeds_fit, z_fit, se_fit, speeds_eval):
     if cand.runout:
         Bf = np.column_stack([Bf, np.ones(len(speeds_fit)), 1j * np.ones(len(speeds_fit))])
         Be = np.column_stack([Be, np.ones(len(speeds_eval)), 1j * np.ones(len(speeds_eval))])
-    w = 1.0 / np.sqrt(se_fit**2 + (RTOL * np.abs(z_fit)) ** 2)
+    w = 1.0 / np.sqrt(se_fit**2 + (model.rtol * np.abs(z_fit)) ** 2)
     coef, _ = solve_real_linear(Bf, z_fit, w)
     return coef, Be @ coef, (kx, ky, cx, cy, angle)
 
 
-def z2_of(z, s, se):
-    """Squared residual over its variance (chi-square, 2 degrees of freedom)."""
-    return np.abs(z - s) ** 2 / (se**2 + (RTOL * np.abs(s)) ** 2)
+def z2_of(z, s, se, rtol):
+    """Squared residual over its variance (chi-square, 2 degrees of freedom), the model
+    trusted to ``rtol`` of its size."""
+    return np.abs(z - s) ** 2 / (se**2 + (rtol * np.abs(s)) ** 2)
 
 
 def fit_bearings(model, cand, bins, train, bounds, start=None):
@@ -153,7 +158,7 @@ def fit_bearings(model, cand, bins, train, bounds, start=None):
 
     def resid(p):
         _, s, _ = predict(model, cand, p, sp, z, se, sp)
-        d = (z - s) / np.sqrt(se**2 + (RTOL * np.abs(s)) ** 2)
+        d = (z - s) / np.sqrt(se**2 + (model.rtol * np.abs(s)) ** 2)
         return np.r_[d.real, d.imag]
 
     (klo, khi), (clo, chi) = bounds

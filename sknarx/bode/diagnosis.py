@@ -2,13 +2,14 @@
 
 Most rotating-machinery users have order-tracked run-ups or coast-downs, not raw
 time series. This front end diagnoses such a record (loaded and binned by
-:mod:`sknarx.gap.bode`) against a linear rotor described by a file
+:mod:`sknarx.bode.records`) against a linear rotor described by a file
 (:mod:`sknarx.rotor.beam`): its steady order response, or -- when the record is a
 run-up too fast to be quasi-steady -- a simulated and order-tracked run-up
-(:mod:`sknarx.rotor.runup`), through the order model of :mod:`sknarx.gap.bode_model`.
-The split, search, ranking, verdict and shrink are the gap core's
-(:mod:`sknarx.gap.core`); the report is written by the caller
-(:func:`sknarx.gap.bode_report.write_bode_outputs`).
+(:mod:`sknarx.rotor.runup`), through the order model of :mod:`sknarx.bode.model`.
+The split, search, ranking, verdict and shrink are those of the time-series front end
+(:mod:`sknarx.gap.search`, :class:`~sknarx.gap.VerdictRule`, :mod:`sknarx.gap.document`)
+under :data:`~sknarx.gap.rule.ORDER_DOMAIN_RULE`; the report is written by the caller
+(:func:`sknarx.bode.report.write_bode_outputs`).
 """
 
 from __future__ import annotations
@@ -19,32 +20,22 @@ import logging
 import numpy as np
 import pandas as pd
 
+from ..gap.budget import SearchBudget
+from ..gap.candidate import Candidate
+from ..gap.document import ranking_entries, verdict_entries
+from ..gap.evidence import alternating_split
+from ..gap.floor import noise_floor
+from ..gap.gapmap import regions, true_runs
+from ..gap.result import GapDiagnosis
+from ..gap.rule import ORDER_DOMAIN_RULE
+from ..gap.search import FrontEnd, search
 from ..rotor import EFFECTS
 from ..rotor.beam import beam_rotor_from_config
 from ..rotor.runup import damped_modes, sweep_parameter, transient_end_rpm
-from .bode import RPM, bin_bode, load_bode, runup_rate
-from .bode_model import (
-    TRANSIENT_TOL,
-    Candidate,
-    OrderModel,
-    complex_pairs,
-    fit_bearings,
-    predict,
-    z2_of,
-)
-from .core import (
-    CandidateFit,
-    FrontEnd,
-    alternating_split,
-    conclude,
-    decide,
-    preferred,
-    public_ranking,
-    search,
-)
-from .gapmap import regions, true_runs
-from .result import GapDiagnosis
-from .settings import ORDER_DOMAIN_SETTINGS
+from .model import TRANSIENT_TOL, OrderModel, complex_pairs, fit_bearings, predict
+from .model import Candidate as OrderCandidate
+from .model import z2_of as _z2_of
+from .records import RPM, bin_bode, load_bode, runup_rate
 
 __all__ = ["load_bode", "bin_bode", "runup_rate", "diagnose_order_domain", "CANDIDATES"]
 
@@ -53,9 +44,9 @@ logger = logging.getLogger(__name__)
 #: the effects a 1x order record can test against a linear rotor
 CANDIDATES = ("runout", "anisotropy")
 SWEEP_LIMIT = 0.1  # sweep parameter above which a run-up is simulated, not taken as steady
-# a bin's squared residual over its variance is chi-square with 2 degrees of freedom when
-# the model is right; above 9 (p = exp(-9/2) ~ 0.011) the bin counts as disagreeing
-SIGNIFICANT_Z2 = 9.0
+#: a bin's squared residual over its variance is chi-square with 2 degrees of freedom
+#: when the model is right; above the rule's region point it counts as disagreeing
+SIGNIFICANT_Z2 = ORDER_DOMAIN_RULE.region_z2
 BLOCK_BINS = 3  # training and held-out bins alternate in blocks of this many
 #: two training and two held-out blocks: the fewest bins on which a fit is judged where it
 #: interpolates between the speeds it saw
@@ -84,8 +75,13 @@ def _untestable(cfg) -> list[dict]:
     return out
 
 
+def z2_of(z, s, se):
+    """Each bin's squared residual over its variance under the order-domain rule."""
+    return _z2_of(z, s, se, ORDER_DOMAIN_RULE.rtol)
+
+
 def _comparison(bins, z, s, se, sel, channel) -> pd.DataFrame:
-    """The gap core's comparison table of the bins ``sel`` (one 1x feature per bin)."""
+    """The comparison table of the bins ``sel`` (one 1x feature per bin)."""
     z2 = z2_of(z, s, se)[sel]
     return pd.DataFrame({"speed": bins.speed.to_numpy()[sel], "window": "run-up",
                          "channel": channel, "feature": "1x",
@@ -116,11 +112,11 @@ class _BodeFrontEnd(FrontEnd):
         self.curves = {}  # each candidate's 1x at every bin (m), by its label
 
     def fit(self, names):
-        return self._fit(Candidate(runout="runout" in names,
-                                   anisotropic="anisotropy" in names))
+        return self._fit(OrderCandidate(runout="runout" in names,
+                                        anisotropic="anisotropy" in names))
 
     def fit_pair(self, lead, partner):
-        return self.fit((*lead.names, partner))
+        return self.fit((*lead.effects, partner))
 
     def _fit(self, cand):
         bins, train = self.bins, self.train
@@ -149,9 +145,9 @@ class _BodeFrontEnd(FrontEnd):
         self.curves[json.dumps(cand.label)] = s_all
         # parameters beyond the calibrated nominal's two (isotropic stiffness, damping)
         n_added = len(p) + (2 if cand.runout else 0) - 2
-        return CandidateFit(
-            names=cand.names, params=params, params_std=std, n_params=n_added,
-            heldout_excess=float(cmp["excess"].sum()), cmp=cmp,
+        return Candidate(
+            effects=cand.names, params=params, params_std=std, n_params=n_added,
+            heldout_after=float(cmp["excess"].sum()), cmp=cmp,
             details={"evidence": _evidence(cand, bins, z, self.s_cal, s_all, params,
                                            self.slow_rpm),
                      "unbalance_kg_m": [[float(abs(u)), float(np.degrees(np.angle(u)))]
@@ -159,19 +155,20 @@ class _BodeFrontEnd(FrontEnd):
             state=(cand, p))
 
 
-def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
+def diagnose_order_domain(measured, cfg: dict, rule=None, budget=None) -> GapDiagnosis:
     """Diagnose a 1x Bode record against the linear rotor of a rotor file.
 
     Parameters
     ----------
     measured : path-like
         The order-tracked record: one row per revolution, columns named by the rotor
-        file's ``[measurement]`` section (see :func:`sknarx.gap.bode.load_bode`).
+        file's ``[measurement]`` section (see :func:`sknarx.bode.records.load_bode`).
     cfg : dict
         The rotor file (:func:`sknarx.rotor.config.load_config`), ``model = "beam"``.
-    settings : DiagnosisSettings, optional
-        Thresholds of the verdict (:data:`sknarx.gap.settings.ORDER_DOMAIN_SETTINGS` by
-        default).
+    rule : VerdictRule, optional
+        The verdict's values (:data:`~sknarx.gap.rule.ORDER_DOMAIN_RULE` by default).
+    budget : SearchBudget, optional
+        Bootstrap resamples and seed (the rest of a budget does not apply here).
 
     Returns
     -------
@@ -179,18 +176,19 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
         Reads like ``diagnosis.json`` (``verdict``, ``ranking``, ``where``, ``shrink``,
         ``nominal_calibration``, ``response_model``, ... see ``docs/gap.md``); its
         ``curves`` hold the binned record and the model curves the report draws. The
-        report is written by the caller: :func:`sknarx.gap.bode_report.write_bode_outputs`.
+        report is written by the caller: :func:`sknarx.bode.report.write_bode_outputs`.
 
     Examples
     --------
     >>> from sknarx.datasets import load_rk4_runup
-    >>> from sknarx.gap.orderdomain import diagnose_order_domain
+    >>> from sknarx.bode import diagnose_order_domain
     >>> from sknarx.rotor.config import load_config
     >>> cfg = load_config("examples/rk4/rotor.toml")  # doctest: +SKIP
     >>> diagnose_order_domain(load_rk4_runup().filename, cfg)["verdict"]  # doctest: +SKIP
     ['anisotropy', 'runout']
     """
-    settings = settings or ORDER_DOMAIN_SETTINGS
+    rule = rule or ORDER_DOMAIN_RULE
+    budget = budget or SearchBudget(n_bootstrap=300)
     rotor, info = beam_rotor_from_config(cfg)
     meas_cfg = info["measurement"]
     if not info["probes"]:
@@ -215,7 +213,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
                          f"{mode!r}.")
     runup = runup_rate(rows) if mode != "steady" else None
     crit = meas_cfg.get("first_critical_rpm")
-    model = OrderModel(rotor, probe)
+    model = OrderModel(rotor, probe, rtol=rule.rtol)
     limits = info["calibration"]
     bounds = (tuple(limits.get("bearing_stiffness", (1e5, 1e8))),
               tuple(limits.get("bearing_damping", (1.0, 2000.0))))
@@ -230,7 +228,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
         return float(np.clip(z2[held] - 2, 0, None).sum())
 
     # the nominal model exactly as described (only the unbalance fitted)
-    nominal = Candidate(False, False)
+    nominal = OrderCandidate(False, False)
 
     def nominal_excess(m, p):
         """Held-out excess of the effect-free rotor at bearings ``p`` on order model ``m``."""
@@ -254,22 +252,29 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     front = _BodeFrontEnd(model, bins, train, held, bounds, (p_cal[0], p_cal[1]),
                           s_cal, slow_rpm, channel)
     logger.info("fitting the effect models to %d speed bins", n)
-    ranked = search(front, CANDIDATES, E_before, cmp0, n_held, settings)
+    ranked = search(front, CANDIDATES, E_before, cmp0, n_held, rule, budget)
     noisy = float(meas_cfg.get("noisy_above_rpm", np.inf))
     e0 = E_before / max(n_held, 1)
-    choice = decide(e0, ranked, settings, n_held)
-    best = preferred(ranked, settings, n_held)
-    for r in ranked:
+    # what the bins' own scatter leaves of the held-out gap (sknarx.gap.floor)
+    floor = noise_floor(lambda m: np.clip(z2_of(m, s_cal, se)[held] - 2.0, 0.0, None),
+                        s_cal, se, np.ones(n, dtype=bool), rule.false_alarm,
+                        budget.n_bootstrap, budget.random_state)
+    verdict = rule.decide(e0, ranked, floor, n_held)
+    entries = ranking_entries(ranked, floor, n_held)
+    for r in entries:
         r["located"] = _locate(r, ranking_fits=front.curves, s_cal=s_cal, bins=bins, z=z,
                                se=se, held=held, noisy_rpm=noisy)
+    i_best = ranked.index(rule.preferred(ranked, floor, n_held)[0])
+    best = entries[i_best]
     s_best = front.curves[json.dumps(best["effect"])]
     z2_best = z2_of(z, s_best, se)
-    response, s_quasi, until = _response_model(rotor, best, s_best, cal, mode, bins, train,
-                                               bounds, crit_cal, noisy, z, se, sp, heldout)
+    response, s_quasi, until = _response_model(rotor, best, ranked[i_best].state[0], s_best,
+                                               cal, mode, bins, train, bounds, crit_cal,
+                                               noisy, z, se, sp, heldout)
     where = _regions(bins, z, s_cal, se, noisy, channel)
     doc = {
         "verdict": None,
-        "ranking": public_ranking(ranked) + _untestable(cfg),
+        "ranking": entries + _untestable(cfg),
         "where": where,
         # where the corrected model still disagrees with the measurement, the same way
         "remaining": _regions(bins, z, s_best, se, noisy, channel),
@@ -290,16 +295,15 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
         "gap_by_band": _gap_by_band(bins, z2_cal, z2_best, held, noisy),
         "response_model": response,
         "gap_before": {"heldout_excess": E_before, "per_feature": e0,
+                       "floor": floor.to_dict(),
                        "nominal_as_described_heldout_excess": heldout(z2_nom)},
         "split": {"bins": n, "train_bins": int(train.sum()), "heldout_bins": n_held,
                   "scheme": f"alternating blocks of {BLOCK_BINS} bins of 20 rpm"},
         "n_heldout_features": n_held,
         "limits": _limits(cfg, info, bins, noisy, runup, until),
-        "settings": {k: getattr(settings, k) for k in (
-            "no_gap_per_feature", "min_shrink", "min_log_shrink", "pair_trigger",
-            "pair_gain", "pair_margin", "n_bootstrap", "seed")},
+        "settings": {"rule": rule.to_dict(), "budget": budget.to_dict()},
     }
-    doc.update(conclude(choice, ranked, cmp0, where, settings, n_held))
+    doc.update(verdict_entries(verdict, ranked, cmp0, where, rule, budget, n_held))
     modes = _verdict_modes(rotor, best)
     doc["critical_speeds_rpm"] = sorted(m["rpm"] for m in modes)
     doc["modes"] = modes
@@ -324,7 +328,7 @@ def diagnose_order_domain(measured, cfg: dict, settings=None) -> GapDiagnosis:
     # the rotor the effects were fitted on: the nominal with its calibrated bearings
     base = rotor.with_bearings(kxx=kcs_cal[0], kyy=kcs_cal[0], cxx=kcs_cal[2], cyy=kcs_cal[2])
     return GapDiagnosis(doc, front_end="order-domain", base=base, curves=curves,
-                        tables={"before": cmp0, "after": best["_cmp"]})
+                        tables={"before": cmp0, "after": ranked[i_best].cmp}, verdict=verdict)
 
 
 def _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds, nominal,
@@ -351,7 +355,7 @@ def _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds, 
     if mode != "run-up" and runup["sweep"]["sweep_parameter"] < SWEEP_LIMIT:
         return {**out, "sweep_note": runup, "runup": None}
     E_steady = nominal_excess(model, p_cal)
-    swept = OrderModel(rotor, probe, runup)
+    swept = OrderModel(rotor, probe, runup, rtol=model.rtol)
     logger.info("run-up at %.0f rpm/s is not quasi-steady (sweep parameter %.2f): "
                 "calibrating the simulated, order-tracked run-up", runup["rate_rpm_s"],
                 runup["sweep"]["sweep_parameter"])
@@ -361,11 +365,12 @@ def _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds, 
                             "quasi-steady model": E_steady}}
 
 
-def _response_model(rotor, best, s_best, cal, mode, bins, train, bounds, crit_cal, noisy,
-                    z, se, sp, heldout):
+def _response_model(rotor, best, cand_best, s_best, cal, mode, bins, train, bounds,
+                    crit_cal, noisy, z, se, sp, heldout):
     """The document's ``response_model``, the verdict's quasi-steady curve (None unless
     the run-up was simulated) and the speed (rpm) above which the run-up is steady
-    (None likewise)."""
+    (None likewise); ``best`` the judged candidate's ranking entry, ``cand_best`` its
+    order-model candidate."""
     runup, sweep_note = cal["runup"], cal["sweep_note"]
     if runup is None:
         response = {"kind": "steady-state order response"}
@@ -378,7 +383,6 @@ def _response_model(rotor, best, s_best, cal, mode, bins, train, bounds, crit_ca
     until, _ = transient_end_rpm(_rotor_of(rotor, best["params"]), runup["rpm_start"],
                                  runup["rpm_end"], runup["rate_rpm_s"], TRANSIENT_TOL)
     # the same verdict on a quasi-steady model: how much the sweep itself matters
-    cand_best = best["_fit"].state[0]
     logger.info("the verdict on a quasi-steady model, for comparison")
     steady_model, p_steady = cal["steady"]
     # started from the quasi-steady calibration, not the run-up one
@@ -412,7 +416,7 @@ def _response_model(rotor, best, s_best, cal, mode, bins, train, bounds, crit_ca
 
 
 def _locate(r, ranking_fits, s_cal, bins, z, se, held, noisy_rpm=np.inf, thr=SIGNIFICANT_Z2,
-            max_hole=2):
+            max_hole=2):  # r: a ranking entry of the document
     """Where each effect of a candidate acts: the speed range holding most of its gain.
 
     The gain of an effect is, per bin, the drop of ``z^2`` it brings -- over the

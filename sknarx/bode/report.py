@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 
 from .._report import figure, page, provenance, quantity, table, value_range
+from ..gap.report_text import alike_text, verdict_text
 from ..io import json_safe, write_atomic, write_text_atomic
 from ..plotting import plt, save
-from .report import alike_text, closest_text
 
 __all__ = ["figures", "html_report", "write_bode_outputs"]
 
@@ -149,7 +149,7 @@ def html_report(doc, figs):
     # what a named effect cannot be told from, or what the closest candidate of an
     # unexplained one missed, is stated where the verdict is
     alike = (alike_text(doc["verdict"]).strip()
-             if doc["verdict"] not in ("no-gap", "unexplained") else closest_text(doc).strip())
+             if doc["verdict"] not in ("no-gap", "unexplained") else verdict_text(doc))
     body = f"""<h2>Verdict: {html.escape(v)} - {100 * doc['shrink']:.0f} % of the held-out gap
 removed{band_text}</h2>{f'<p>{html.escape(alike)}</p>' if alike else ''}
 <h2>Nominal calibration</h2><p>The described rotor's first critical speed is

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._atomic import write_atomic, write_text_atomic
-from .._report import dependency_versions
+from ._atomic import write_atomic, write_text_atomic
+from ._report import dependency_versions
 
 __all__ = ["Checkpoint", "fingerprint"]
 
@@ -90,7 +90,7 @@ def fingerprint(obj) -> str:
     Examples
     --------
     >>> import numpy as np
-    >>> from sknarx.gap.checkpoint import fingerprint
+    >>> from sknarx._checkpoint import fingerprint
     >>> fingerprint({"a": np.arange(3.0)}) == fingerprint({"a": np.array([0.0, 1, 2])})
     True
     >>> fingerprint(1.0) == fingerprint(1.0 + 1e-15)
@@ -104,7 +104,7 @@ def fingerprint(obj) -> str:
 def _code_digest() -> str:
     """The package's own source and its dependencies' versions (numerics, compiled
     kernels): a step computed by other code is not reused."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parent
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         h.update(str(path.relative_to(root)).encode())
@@ -128,7 +128,7 @@ class Checkpoint:
     Examples
     --------
     >>> import tempfile
-    >>> from sknarx.gap.checkpoint import Checkpoint
+    >>> from sknarx._checkpoint import Checkpoint
     >>> calls = []
     >>> def slow(x):
     ...     calls.append(x)

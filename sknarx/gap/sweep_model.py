@@ -1,0 +1,181 @@
+"""How the measured experiment is simulated: speeds, sampling, channels, windows.
+
+:class:`SweepModel` runs the nonlinear simulator at every speed step of a sweep and
+takes the same order features as the measurement's. The speeds of one evaluation run
+on threads (the compiled integrator releases the GIL); several parameter points share
+the threads' queue.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from joblib import cpu_count
+
+from ..orders import record_features, stack_features
+from ..rotor import RotorBearingSimulator, RotorParameters
+
+__all__ = ["NUISANCE", "NUISANCE_UNITS", "SweepModel"]
+
+#: name -> (lower, upper, scale, start)
+NUISANCE = {
+    "unbalance_scale": (0.7, 1.4, "lin", 1.0),
+    "unbalance_phase": (-np.pi, np.pi, "lin", 0.0),
+    "stiffness_scale": (0.85, 1.15, "lin", 1.0),
+    "damping_scale": (0.6, 1.6, "lin", 1.0),
+}
+NUISANCE_UNITS = {"unbalance_scale": "-", "unbalance_phase": "rad", "stiffness_scale": "-",
+                  "damping_scale": "-"}
+
+_POOLS: dict = {}
+
+
+def _pool(threads: int | None = None) -> ThreadPoolExecutor:
+    """The process's thread pool of ``threads`` workers (None: one per CPU this process
+    may use, as joblib counts them), made once."""
+    n = max(1, int(threads or cpu_count()))
+    pool = _POOLS.get(n)
+    if pool is None:
+        pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n)
+    return pool
+
+
+@dataclass
+class SweepModel:
+    """How to simulate the measured experiment: speeds, sampling, channels, windows."""
+
+    base: RotorParameters
+    fs: float
+    n_samples: int
+    channels: tuple
+    transient_s: float = 0.5
+    seed: int = 0
+    settle_s: float = 0.0  # simulated and discarded before each record (0: from rest)
+    # speed (rad/s) -> (q, v): each speed's run continues a settled run from ``lead_s``
+    # before its record instead of settling from rest (see ``warmed``; None: never)
+    warm: dict | None = None
+    lead_s: float | None = 0.3
+    # the integration step: h |lambda|max <= step_factor (see RotorBearingSimulator)
+    step_factor: float = 2.0
+    # threads the speed steps run on (None: one per CPU this process may use)
+    threads: int | None = None
+
+    def params(self, nuis) -> RotorParameters:
+        su, ph, sk, sc = nuis
+        b = self.base
+        return b.with_unbalance_scaled(su).replace(
+            unbalance_phase=b.unbalance_phase + ph, k1=b.k1 * sk, k2=b.k2 * sk,
+            c_a=b.c_a * sc, c_b=b.c_b * sc, c_d1=b.c_d1 * sc, c_d2=b.c_d2 * sc,
+            c_O1=b.c_O1 * sc, c_O2=b.c_O2 * sc,
+        )
+
+    def warmed(self, speeds, nuis, effects=()) -> SweepModel:
+        """This model with every speed's run continuing the settled run of the rotor
+        ``(nuis, effects)``: ``lead_s`` seconds of settling instead of ``settle_s``.
+
+        A local search moves the parameters a little: its runs start near their own
+        steady state and the short lead lets the small difference decay (the slow
+        modes are the least excited ones). Every run of one warmed model starts from
+        the same states, so its residual is a smooth function of the parameters.
+        Records that start with a transient (``settle_s`` 0) are not warmed: their
+        start from rest is part of what is compared.
+        """
+        if self.lead_s is None or self.settle_s <= self.lead_s:
+            return self
+        sim = self._simulator(nuis, effects, speeds)
+
+        def one(w):
+            return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
+                                            lead=self.lead_s)
+
+        return dataclasses.replace(self, warm=dict(_pool(self.threads).map(one, speeds)))
+
+    def _simulator(self, nuis, effects, speeds):
+        sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed,
+                                    step_factor=self.step_factor)
+        # build once, before the threads share it: the setup and each speed's step
+        _ = sim._setup
+        for w in speeds:
+            sim.substeps(self.fs, float(w))
+        return sim
+
+    def records(self, speeds, nuis, effects=()):
+        """Simulated records at ``speeds``; the speeds run concurrently (the integrator
+        releases the GIL), which halves an evaluation on two cores."""
+        return _only(self._per_speed(speeds, [(nuis, effects)], lambda record: record))
+
+    def _per_speed(self, speeds, points, then):
+        """``then(record)`` of each speed's simulated record for each ``(nuis,
+        effects)`` point, computed in the thread that simulated it (so one thread's
+        post-processing overlaps the other's integration), in the order of ``speeds``.
+        Every point's speeds share the two threads' queue, so a thread that finishes
+        its last speed of one point starts on the next point instead of waiting for the
+        other's last speed (and a point's simulator is built while the last one runs).
+        Each point gets its list of results, or the first exception one of its speeds
+        raised."""
+        warm = self.warm or {}
+
+        def jobs():
+            # lazily: the pool starts on a point's speeds while the next is built
+            for nuis, effects in points:
+                try:
+                    sim = self._simulator(nuis, effects, speeds)
+                except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
+                    sim = exc
+                for w in speeds:
+                    yield sim, float(w)
+
+        def one(job):
+            sim, w = job
+            if isinstance(sim, Exception):
+                return sim
+            try:
+                # automatic step: halved if an effect's stiff contact makes it unstable
+                state = warm.get(w)
+                run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
+                                           settle=self.settle_s if state is None
+                                           else self.lead_s, state=state)
+                Y = np.column_stack([run[c] for c in self.channels])
+                return then((w, run["t"], Y))
+            except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
+                return exc
+
+        done = list(_pool(self.threads).map(one, jobs()))
+        n = len(speeds)
+        out = []
+        for i in range(len(points)):
+            part = done[i * n:(i + 1) * n]
+            out.append(next((r for r in part if isinstance(r, Exception)), part))
+        return out
+
+    def features(self, speeds, nuis, effects=()):
+        """Order features of the simulated experiment as a DataFrame."""
+        keys, vals, ses, _ = self.feature_arrays(speeds, nuis, effects)
+        df = pd.DataFrame(keys, columns=["speed", "window", "channel", "feature"])
+        df["re"], df["im"], df["se"] = vals.real, vals.imag, ses
+        return df
+
+    def feature_arrays(self, speeds, nuis, effects=()):
+        return _only(self.feature_arrays_many(speeds, [(nuis, effects)]))
+
+    def feature_arrays_many(self, speeds, points):
+        """:meth:`feature_arrays` of several ``(nuis, effects)`` points, run together
+        (see :meth:`_per_speed`); a point whose simulation failed gets its exception
+        instead."""
+        channels = list(self.channels)
+        parts = self._per_speed(
+            speeds, points, lambda record: record_features(record, channels,
+                                                           self.transient_s))
+        return [p if isinstance(p, Exception) else stack_features(p) for p in parts]
+
+
+def _only(results):
+    """The one point's result of a batched call, or its exception raised."""
+    (out,) = results
+    if isinstance(out, Exception):
+        raise out
+    return out

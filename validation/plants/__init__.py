@@ -1,0 +1,1 @@
+"""Plants independent of ``sknarx.rotor``, for blind validation of the gap diagnosis."""
