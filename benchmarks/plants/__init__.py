@@ -1,1 +1,0 @@
-"""Plants independent of ``sknarx.rotor``, for blind validation of the gap diagnosis."""
