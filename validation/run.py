@@ -63,7 +63,8 @@ def write_log(path, records) -> None:
 
     def write(tmp):
         # a fixed mtime: the same records give the same bytes
-        with open(tmp, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as f:
+        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", fileobj=raw, mode="wb",
+                                                   mtime=0) as f:
             f.write(lines.encode())
 
     write_atomic(path, write)

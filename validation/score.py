@@ -107,18 +107,21 @@ def _top2(rec) -> set:
             for n in ((r["effect"],) if isinstance(r["effect"], str) else r["effect"])}
 
 
-def rates(records, rule: VerdictRule) -> dict:
+def rates(records, rule: VerdictRule, verdict_of=None) -> dict:
     """Each rate of the module docstring as ``(successes, trials)`` (the shrink ratio:
-    ``(median, n)``), with the misses of top-1 as ``(seed, truth, verdict)``."""
+    ``(median, n)``), with the misses of top-1 as ``(seed, truth, verdict)``.
+    ``verdict_of`` (a record to its verdict) scores verdicts given otherwise, such as
+    each record's ``logged_verdict`` (no shrink ratio then)."""
     got = {"top1": [0, 0], "pairs_in_top2": [0, 0], "false_alarm": [0, 0],
            "unexplained_out_of_library": [0, 0], "names_right": [0, 0]}
     ratios, misses = [], []
     for rec in records:
-        verdict, shrink = decide(rec, rule)
+        verdict, shrink = decide(rec, rule) if verdict_of is None else \
+            (verdict_of(rec), float("nan"))
         detectable = rec["in_library"] and visible(rec)
         truth = truth_label(rec)
         right = detectable and verdict in (truth, truth_label(rec, visible_only=False))
-        if right and rec.get("oracle_shrink", 0) > 0:
+        if right and rec.get("oracle_shrink", 0) > 0 and shrink == shrink:
             ratios.append(shrink / rec["oracle_shrink"])
         if detectable and isinstance(truth, str):
             got["top1"][1] += 1
