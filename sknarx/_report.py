@@ -146,3 +146,22 @@ def value_range(lo, hi, unit: str, decimals: int = 1) -> str:
     """``90.0 rad/s`` for a single value, ``90.0-110.0 rad/s`` for a range."""
     a, b = f"{float(lo):.{decimals}f}", f"{float(hi):.{decimals}f}"
     return f"{a} {unit}" if a == b else f"{a}-{b} {unit}"
+
+
+def percentage(value: float, decimals: int = 1) -> str:
+    """A value given in per cent, with ``decimals`` decimals or as many more as keep it
+    from reading as a whole number it is short of.
+
+    Examples
+    --------
+    >>> percentage(99.99999988, 6), percentage(12.345), percentage(100.0, 2)
+    ('99.9999999 %', '12.3 %', '100.00 %')
+    """
+    v = float(value)
+    if not math.isfinite(v):
+        return f"{v} %"
+    text = f"{v:.{decimals}f}"
+    while decimals < 15 and float(text) == round(float(text)) and abs(float(text)) > abs(v):
+        decimals += 1
+        text = f"{v:.{decimals}f}"
+    return f"{text} %"

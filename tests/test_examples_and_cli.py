@@ -73,6 +73,21 @@ def test_paper_command_quick(tmp_path):
     assert set(m["validity_tests"]) == {"paper", "improved", "improved-spline"}
     assert {"speed", "term", "coef", "std_err", "aerr"} <= set(m["summary_per_speed"][0])
     assert "Judging the models" in html and "phi_ee" in html
+    # no value is a string standing for a number that is not there (pooled rows: null)
+    def strings(x):
+        if isinstance(x, dict):
+            return [s for v in x.values() for s in strings(v)]
+        if isinstance(x, list):
+            return [s for v in x for s in strings(v)]
+        return [x] if isinstance(x, str) else []
+
+    assert "nan" not in {s.lower() for s in strings(m)}
+    pooled = [r for rows in m["validity_tests"].values() for r in rows if r["scope"] == "pooled"]
+    assert pooled and all(r["speed"] is None for r in pooled)
+    # the printed total AERR is not rounded up to a whole it is short of
+    printed = res.stdout.split("total AERR ")[1].split(" %")[0]
+    assert float(printed) < 100 or m["aerr_total"] >= 100
+    assert "well determined" not in html
 
 
 def test_cli_reports_bad_usage():

@@ -17,9 +17,11 @@ def percent(share) -> str:
 
     Examples
     --------
-    >>> percent(0.6), percent(0.996), percent(0.9999999988)
-    ('60 %', '99.6 %', '>99.9 %')
+    >>> percent(0.6), percent(0.996), percent(0.9999999988), percent(None)
+    ('60 %', '99.6 %', '>99.9 %', '-')
     """
+    if share is None or not np.isfinite(float(share)):
+        return "-"
     value = 100.0 * float(share)
     text = f"{value:.0f} %"
     if 99.5 <= abs(value) < 100.0:
