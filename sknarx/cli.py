@@ -13,7 +13,10 @@ import logging
 import os
 import shlex
 import shutil
+import signal
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -26,6 +29,8 @@ EFFECTS = ("rub", "misalignment", "crack", "looseness", "clearance", "anisotropy
 CHANNELS = ("xO1", "yO1", "xO2", "yO2", "xA", "yA", "xB", "yB")
 #: where ``sknarx gap`` keeps its finished steps inside ``--out`` until the outputs exist
 CHECKPOINT_DIR = ".checkpoint"
+#: set by :func:`console_main`: the process is the ``sknarx`` program, not a caller's
+_AS_PROGRAM = False
 
 
 class _Parser(argparse.ArgumentParser):
@@ -35,22 +40,32 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
-def _command_line() -> str:
-    return "sknarx " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+def _command_line(argv) -> str:
+    """The command that reproduces a run: ``sknarx`` and the arguments it was given."""
+    return "sknarx " + " ".join(shlex.quote(str(a)) for a in argv)
 
 
 def _check_out(path) -> Path:
+    """The output folder, created and tried with a file before any work is done."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file; give a folder to write the results into.")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out, prefix=".sknarx-write-check-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise ValueError(f"--out {out}: cannot write there ({reason}); give a folder you "
+                         "can create and write to.") from exc
     return out
 
 
 def _paper(args) -> int:
-    from tqdm.auto import tqdm
-
+    from ._progress import progress_bar
     from .reproduce import PaperCase, run_study
     from .reproduce.report import write_outputs
+    from .reproduce.text import aerr_text
 
     out = _check_out(args.out)
     case = PaperCase(n_jobs=args.n_jobs)
@@ -59,8 +74,7 @@ def _paper(args) -> int:
             range(50, 321, 10)), cv_samples=4096, validation_samples=8192)
     start = time.perf_counter()
     n_steps = 9  # the study's marked steps plus the report
-    bar = tqdm(total=n_steps, desc="sknarx paper", unit="step", file=sys.stderr,
-               disable=not logger.isEnabledFor(logging.INFO), dynamic_ncols=True)
+    bar = progress_bar(total=n_steps, desc="sknarx paper", unit="step")
 
     def progress(name):
         bar.set_postfix_str(name[:40])
@@ -68,14 +82,14 @@ def _paper(args) -> int:
         logger.debug("[%6.1f s] %s", time.perf_counter() - start, name)
 
     study = run_study(case, progress=progress)
-    metrics = write_outputs(study, out, _command_line())
+    metrics = write_outputs(study, out, args.command_line)
     progress("figures and report")
     bar.close()
     val = metrics["validation"]
     print(f"Wrote {out / 'report.html'} (open it first), metrics.json, figures, tables, "
           "model.json")
     print(f"critical speed {metrics['critical_speed']:.1f} rad/s (paper 144.5); "
-          f"{len(metrics['selected_terms'])} terms, total AERR {metrics['aerr_total']:.6f} %")
+          f"{len(metrics['selected_terms'])} terms, total AERR {aerr_text(metrics['aerr_total'])}")
     for v in val:
         print(f"  validation {v['speed']:g} rad/s: NRMSE {100 * float(v['nrmse']):.2f} %, "
               f"1x error {100 * float(v['amp1x_rel_error']):.2f} %")
@@ -89,7 +103,6 @@ def _gap(args) -> int:
     from .io import read_table
     from .rotor.config import load_config, paper_rotor_from_config
 
-    out = _check_out(args.out)
     cfg = load_config(args.rotor) if args.rotor else {}
     model = cfg.get("rotor", {}).get("model", "paper")
     if model not in ("paper", "beam"):
@@ -111,8 +124,9 @@ def _gap(args) -> int:
                            "to time-series "
                            "sweeps; an order-domain (Bode) record is diagnosed against its "
                            "own library")
+        out = _check_out(args.out)
         result = diagnose_order_domain(args.measured, cfg)
-        doc = write_bode_outputs(result, out, _command_line())
+        doc = write_bode_outputs(result, out, args.command_line)
     else:
         from .gap.narx_view import narx_view_of
 
@@ -125,6 +139,7 @@ def _gap(args) -> int:
                 raise ValueError(f"--second-pass {args.second_pass}: {exc}") from exc
         else:
             kw_pass = {}
+        out = _check_out(args.out)
         start = time.perf_counter()
 
         def progress(msg):
@@ -145,7 +160,7 @@ def _gap(args) -> int:
         if not args.no_narx and result["verdict"] != "no-gap":
             narx = narx_view_of(result, measured, base)
             progress("NARX view")
-        doc = write_gap_outputs(result, out, _command_line(), narx)
+        doc = write_gap_outputs(result, out, args.command_line, narx)
         shutil.rmtree(kept, ignore_errors=True)
     print(_verdict_line(doc))
     print(f"wrote {out / 'report.html'} and {out / 'diagnosis.json'}")
@@ -164,16 +179,33 @@ def _unbalance(args) -> int:
     from .rotor.config import load_config
     from .unbalance import identify_unbalance, write_unbalance_outputs
 
-    out = _check_out(args.out)
     cfg = load_config(args.rotor)
+    out = _check_out(args.out)
     doc = write_unbalance_outputs(identify_unbalance(args.features, cfg), out,
-                                  _command_line())
+                                  args.command_line)
     cv = doc["cross_validation"]["methods"]["model-based (this package)"]
     print(f"leave-one-condition-out on {doc['cross_validation']['n_conditions']} labelled "
           f"conditions: MAE {cv['mae_gmm']:.2f} g mm, detection {100 * cv['detection']:.0f} %, "
           f"localisation {100 * cv['localisation']:.0f} %")
     print(f"wrote {out / 'predictions.csv'} ({len(doc['predictions'])} rows), "
           f"{out / 'report.html'} and {out / 'unbalance.json'}")
+    return 0
+
+
+def _datasets(args) -> int:
+    from .datasets import DATASETS, dataset_path
+
+    if args.action == "path":
+        if not args.name:
+            raise ValueError("sknarx datasets path NAME: give a dataset name, one of "
+                             f"{', '.join(DATASETS)}.")
+        print(dataset_path(args.name))
+        return 0
+    width = max(map(len, DATASETS))
+    for name, (_, _, what) in DATASETS.items():
+        print(f"{name:{width}s}  {what}")
+    print("\n'sknarx datasets path NAME' prints a dataset's file; licence and provenance: "
+          "sknarx.datasets' loaders (DESCR, license).")
     return 0
 
 
@@ -239,6 +271,13 @@ def _parser() -> argparse.ArgumentParser:
                    "and trial_runs (see examples/rk4/rotor.toml)")
     u.add_argument("--out", required=True, help="output folder (created)")
     u.set_defaults(func=_unbalance)
+    d = sub.add_parser("datasets", parents=[common],
+                       help="list the real measured data that ship with sknarx, or print "
+                       "one's file path")
+    d.add_argument("action", nargs="?", choices=("list", "path"), default="list",
+                   help="list (default) or path NAME")
+    d.add_argument("name", nargs="?", help="the dataset whose file path to print")
+    d.set_defaults(func=_datasets, out=None)
     return parser
 
 
@@ -252,9 +291,23 @@ def _configure_logging(args) -> None:
     logger.propagate = False
 
 
+def console_main() -> None:
+    """The ``sknarx`` program: :func:`main` on ``sys.argv``, exiting with its code.
+
+    After Ctrl-C the worker threads wind down before the interpreter exits; a second
+    Ctrl-C then is ignored rather than shown as a traceback from that wind-down (the
+    finished steps are already kept).
+    """
+    global _AS_PROGRAM
+    _AS_PROGRAM = True
+    sys.exit(main())
+
+
 def main(argv=None) -> int:
     """Run the command line; returns the exit code (2 for a user error)."""
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     args = _parser().parse_args(argv)
+    args.command_line = _command_line(argv)
     _configure_logging(args)
     # the commands parallelise over speed steps and candidates themselves: BLAS threads
     # of their small solves would only fight them for the cores (limited here and in
@@ -271,6 +324,8 @@ def _run(args) -> int:
     try:
         return args.func(args)
     except KeyboardInterrupt:
+        if _AS_PROGRAM and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C: see console_main
         kept = Path(args.out) / CHECKPOINT_DIR if args.command == "gap" else None
         print("sknarx: interrupted" + (
             f"; the same command again resumes from {kept}" if kept and kept.exists()
@@ -293,4 +348,4 @@ def _run(args) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()

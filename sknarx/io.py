@@ -36,9 +36,10 @@ def read_table(path, what="table", nrows=None) -> pd.DataFrame:
 
     Raises
     ------
-    FileNotFoundError, ValueError
-        With one-line messages: no such file, a folder, an unsupported suffix, an
-        empty file, a header without rows, an unparseable CSV.
+    FileNotFoundError, ValueError, ImportError
+        With one-line messages naming the file: no such file, a folder, an unsupported
+        suffix, an empty file, a header without rows, an unparseable CSV, a file that is
+        not UTF-8 text, an unreadable parquet file, a parquet file without pyarrow.
     """
     path = Path(path)
     if not path.exists():
@@ -51,7 +52,7 @@ def read_table(path, what="table", nrows=None) -> pd.DataFrame:
     if path.stat().st_size == 0:
         raise ValueError(f"{what}: {path} is empty; expected a header row and data rows.")
     if path.suffix.lower() == ".parquet":
-        df = pd.read_parquet(path)
+        df = _read_parquet(path, what)
     else:
         with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
             first = fh.readline()
@@ -69,11 +70,27 @@ def read_table(path, what="table", nrows=None) -> pd.DataFrame:
                              "needs as many fields as the header.") from exc
         except pd.errors.EmptyDataError as exc:
             raise ValueError(f"{what}: {path} has no header row.") from exc
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{what}: {path} is not UTF-8 text (byte {exc.start} is "
+                             f"0x{exc.object[exc.start]:02x}); save it as a UTF-8 CSV or as "
+                             ".parquet.") from exc
     df.columns = [str(c).strip() for c in df.columns]
     if len(df) == 0 and nrows != 0:
         raise ValueError(f"{what}: {path} has a header ({', '.join(df.columns[:8])}) but no "
                          "data rows.")
     return df
+
+
+def _read_parquet(path, what) -> pd.DataFrame:
+    try:
+        return pd.read_parquet(path)
+    except ImportError as exc:
+        raise ImportError(f"{what}: reading {path.name} needs pyarrow; install it with "
+                          'pip install "sknarx[parquet]", or save the table as .csv.') from exc
+    except (ValueError, OSError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+        line = " ".join(str(exc).split())[:200]
+        raise ValueError(f"{what}: {path} is not a readable parquet file ({line}); "
+                         "write it again with pandas' to_parquet or save it as .csv.") from exc
 
 
 def model_to_json(model, path=None) -> str:

@@ -219,3 +219,51 @@ def test_an_order_domain_record_or_its_rotor_file_wrong(rk4, case, needles, caps
     assert len(lines) == 1 and "Traceback" not in err, err
     for needle in needles:
         assert needle.lower() in lines[0].lower(), (needle, lines[0])
+
+
+def _in_process_error(capsys, argv, *needles):
+    assert cli.main([*argv, "-q"]) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle.lower() in lines[0].lower(), (needle, lines[0])
+
+
+def test_a_csv_that_is_not_text_is_named(tmp_path, capsys):
+    path = tmp_path / "random.csv"
+    path.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    _in_process_error(capsys, ["gap", "--measured", str(path), "--out", str(tmp_path / "o")],
+                      str(path), "not UTF-8 text", "save it as a UTF-8 CSV")
+
+
+def test_a_parquet_file_without_pyarrow_says_how_to_install_it(tmp_path, capsys,
+                                                                 monkeypatch):
+    path = tmp_path / "m.parquet"
+    path.write_bytes(b"PAR1" + b"\0" * 64 + b"PAR1")
+
+    def no_engine(*args, **kwargs):
+        raise ImportError("Unable to find a usable engine; tried using: 'pyarrow', "
+                          "'fastparquet'.")
+
+    monkeypatch.setattr(pd, "read_parquet", no_engine)
+    _in_process_error(capsys, ["gap", "--measured", str(path), "--out", str(tmp_path / "o")],
+                      "m.parquet", 'pip install "sknarx[parquet]"')
+
+
+def test_a_broken_parquet_file_is_named(tmp_path, capsys):
+    pytest.importorskip("pyarrow")
+    path = tmp_path / "m.parquet"
+    path.write_bytes(b"not a parquet file at all")
+    _in_process_error(capsys, ["gap", "--measured", str(path), "--out", str(tmp_path / "o")],
+                      str(path), "not a readable parquet file")
+
+
+def test_records_too_short_for_a_steady_window(tmp_path, capsys):
+    from sknarx.testing import make_trial
+
+    measured, _ = make_trial(None, 7, speeds=(81.7, 146.6, 211.5, 276.5), n_samples=400)
+    path = tmp_path / "short.csv"
+    measured.to_csv(path, index=False)
+    _in_process_error(capsys, ["gap", "--measured", str(path), "--out", str(tmp_path / "o")],
+                      "0.4 s long", "starts with a transient", "record at least 0.81 s")

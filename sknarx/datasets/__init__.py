@@ -19,7 +19,15 @@ from importlib import resources
 import pandas as pd
 from sklearn.utils import Bunch
 
-__all__ = ["load_rk4_runup", "load_rk4_unbalance", "data_path"]
+__all__ = ["load_rk4_runup", "load_rk4_unbalance", "data_path", "dataset_path", "DATASETS"]
+
+#: the shipped datasets by the name the command line takes: (folder, data file, what it is)
+DATASETS = {
+    "rk4-runup": ("rk4_runup", "runup_bode.csv",
+                  "RK-4 rotor kit run-up, order-tracked 1x per revolution (sknarx gap)"),
+    "rk4-unbalance": ("rk4_unbalance", "features_1x.csv",
+                      "RK-4 two-plane unbalance campaign, 1x vectors (sknarx unbalance)"),
+}
 
 
 def data_path(dataset: str, filename: str):
@@ -28,6 +36,22 @@ def data_path(dataset: str, filename: str):
     if not path.is_file():
         raise FileNotFoundError(f"sknarx ships no {dataset}/{filename}.")
     return path
+
+
+def dataset_path(name: str) -> str:
+    """Path of the data file of the shipped dataset ``name`` (a key of :data:`DATASETS`),
+    as ``sknarx datasets path NAME`` prints it.
+
+    Examples
+    --------
+    >>> from sknarx.datasets import dataset_path
+    >>> dataset_path("rk4-runup").endswith("runup_bode.csv")
+    True
+    """
+    if name not in DATASETS:
+        raise ValueError(f"no shipped dataset {name!r}; give one of {', '.join(DATASETS)}.")
+    folder, filename, _ = DATASETS[name]
+    return str(data_path(folder, filename))
 
 
 def _text(dataset, filename):

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from .._checkpoint import Checkpoint, NoCheckpoint
+from .._progress import phase
 from ..orders import TRANSIENT_RATIO, free_response_decay, is_nonsync, order_features
 from ..rotor import EFFECTS, RotorParameters
 from .budget import SearchBudget
@@ -63,6 +64,24 @@ def _steady_1x(meas, speeds, channels):
     return z, m["se"].to_numpy().reshape(shape)
 
 
+#: samples the steady window needs at least for its order features (as
+#: :func:`sknarx.orders.record_features`) and whole revolutions of the slowest speed
+MIN_STEADY_SAMPLES, MIN_STEADY_REVOLUTIONS = 32, 4
+
+
+def _check_steady_window(info, transient_s):
+    """A user error when records that start with a transient leave no steady window."""
+    fs, n = info["fs"], info["n_samples"]
+    w_min = float(min(info["speeds"]))
+    need = transient_s + max(MIN_STEADY_SAMPLES / fs, MIN_STEADY_REVOLUTIONS * 2 * np.pi / w_min)
+    if n / fs < need:
+        raise ValueError(
+            f"measured data: each speed step's record is {n / fs:.3g} s long and starts "
+            f"with a transient (its first {transient_s:g} s are kept apart), which leaves "
+            f"too little steady record; record at least {need:.2g} s per speed step "
+            f"({MIN_STEADY_REVOLUTIONS} revolutions at {w_min:g} rad/s after the transient).")
+
+
 def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, budget):
     """Nominal model updating on the training speeds' steady 1x, simulated over exactly
     the steady window the features were taken from. Each probe's constant vector is
@@ -83,6 +102,16 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, bu
         nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
                           "settle": settle_s + transient_s,
                           "step_factor": budget.step_factor})
+
+
+def _in_phase(desc, compute):
+    """``compute`` run under a progress bar named ``desc`` (its elapsed time and
+    simulations move while it runs)."""
+    def run():
+        with phase(desc):
+            return compute()
+
+    return run
 
 
 def _nuisance_fit(model, meas, train, held, rule, budget, nominal_train):
@@ -253,6 +282,7 @@ class _Run:
         self.starts_transient = bool(self.decay["transient"].median() >= 0.5)
         self.transient_s = transient_s if self.starts_transient else 0.0
         self.settle_s = 0.0 if self.starts_transient else budget.settle_s
+        _check_steady_window(self.info, self.transient_s)
         self.speeds = np.array(self.info["speeds"])
         is_train = alternating_split(self.speeds.size)
         self.train, self.held = self.speeds[is_train], self.speeds[~is_train]
@@ -261,9 +291,10 @@ class _Run:
         """The nominal update started at rotor ``start`` (None without updating)."""
         if not self.update:
             return None
-        return self.kept.step("update", start, lambda: _update_nominal(
-            self.meas, self.train, self.channels, start, self.info, self.transient_s,
-            self.settle_s, self.budget))
+        return self.kept.step("update", start, _in_phase("nominal model updating",
+                              lambda: _update_nominal(
+                                  self.meas, self.train, self.channels, start, self.info,
+                                  self.transient_s, self.settle_s, self.budget)))
 
     def _nuisance(self, model, nominal=None):
         """:func:`_nuisance_fit` of ``model`` (``nominal``: its features at every speed,
@@ -276,7 +307,8 @@ class _Run:
 
         return self.kept.step("nuisance", [model, self.train, self.held, self.rule,
                                            self.budget.n_bootstrap,
-                                           self.budget.random_state], compute)
+                                           self.budget.random_state],
+                              _in_phase("nuisance calibration", compute))
 
     def diagnose(self) -> GapDiagnosis:
         info, rule, budget = self.info, self.rule, self.budget
@@ -296,7 +328,8 @@ class _Run:
                                 step_factor=budget.step_factor)
         self.nominal_all = self.kept.step(
             "features", [self.model, self.speeds, NUISANCE_START],
-            lambda: self.model.features(self.speeds, NUISANCE_START))
+            _in_phase("the updated rotor at every speed",
+                      lambda: self.model.features(self.speeds, NUISANCE_START)))
         spread, n_points = None, 0
         if update is not None:
             logger.info("the updated rotor's harmonics over its parameters' uncertainty")
@@ -312,7 +345,8 @@ class _Run:
         cal0, E0, cmp0, floor = self._nuisance(self.model, self.nominal_all)
         _, cmp_all = self.kept.step(
             "heldout", [self.model, self.speeds, [], cal0, rule],
-            lambda: heldout_gap(self.model, self.meas, self.speeds, cal0, (), rule))
+            _in_phase("the calibrated rotor at every speed",
+                      lambda: heldout_gap(self.model, self.meas, self.speeds, cal0, (), rule)))
         self.tick("nuisance calibration")
         n = max(len(cmp0), 1)
         e0 = E0 / n
