@@ -20,6 +20,7 @@ import logging
 import numpy as np
 import pandas as pd
 
+from .._progress import phase
 from ..gap.budget import SearchBudget
 from ..gap.candidate import Candidate
 from ..gap.document import ranking_entries, verdict_entries
@@ -238,8 +239,9 @@ def diagnose_order_domain(measured, cfg: dict, rule=None, budget=None) -> GapDia
     _, s_nom, _, z2_nom = evaluate(nominal, p_nom)
     logger.info("%d revolutions in %d speed bins; calibrating the nominal rotor (steady "
                 "response)", len(rows), n)
-    cal = _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds,
-                               nominal, nominal_excess)
+    with phase("nominal calibration"):
+        cal = _calibrated_response(model, rotor, probe, runup, mode, bins, train, bounds,
+                                   nominal, nominal_excess)
     model, p_cal, sd_cal, runup = cal["model"], cal["p"], cal["sd"], cal["runup"]
     coef_cal, s_cal, kcs_cal, z2_cal = evaluate(nominal, p_cal)
     cmp0 = _comparison(bins, z, s_cal, se, held, channel)
@@ -268,9 +270,10 @@ def diagnose_order_domain(measured, cfg: dict, rule=None, budget=None) -> GapDia
     best = entries[i_best]
     s_best = front.curves[json.dumps(best["effect"])]
     z2_best = z2_of(z, s_best, se)
-    response, s_quasi, until = _response_model(rotor, best, ranked[i_best].state[0], s_best,
-                                               cal, mode, bins, train, bounds, crit_cal,
-                                               noisy, z, se, sp, heldout)
+    with phase("the verdict's response model"):
+        response, s_quasi, until = _response_model(
+            rotor, best, ranked[i_best].state[0], s_best, cal, mode, bins, train, bounds,
+            crit_cal, noisy, z, se, sp, heldout)
     where = _regions(bins, z, s_cal, se, noisy, channel)
     doc = {
         "verdict": None,

@@ -16,6 +16,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._progress import evaluated
 from ..rotor.runup import runup_order_response, transient_end_rpm
 from .records import RPM
 
@@ -134,6 +135,7 @@ def predict(model, cand, p, speeds_fit, z_fit, se_fit, speeds_eval):
         cy = cx
     allsp = np.unique(np.r_[speeds_fit, speeds_eval])
     B = model.basis(allsp, kx, ky, cx, cy, angle)
+    evaluated()
     Bf = B[np.searchsorted(allsp, speeds_fit)]
     Be = B[np.searchsorted(allsp, speeds_eval)]
     if cand.runout:

@@ -15,7 +15,7 @@ import logging
 import pandas as pd
 from joblib import Parallel, delayed
 
-from .._progress import progress_bar
+from .._progress import phase, progress_bar
 from .candidate import Candidate
 from .evidence import log_shrink
 
@@ -115,7 +115,8 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
     if not ranked:
         return ranked
     lead = ranked[0]
-    more = front.continue_fit(lead)
+    with phase("continuing " + "+".join(lead.effects)):
+        more = front.continue_fit(lead)
     if more is not None:
         if more.heldout_after < lead.heldout_after:
             singles = [more if f is lead else f for f in singles]
@@ -125,7 +126,8 @@ def search(front: FrontEnd, candidates, E0: float, cmp0: pd.DataFrame, n_feature
     if lead.heldout_after / max(n_features, 1) > min(rule.pair_trigger,
                                                       budget.pair_search_from):
         others = [c for c in candidates if (c,) != lead.effects]
-        partners = front.partners(lead, others, budget.n_partners, n_jobs)
+        with phase("choosing partners of " + "+".join(lead.effects)):
+            partners = front.partners(lead, others, budget.n_partners, n_jobs)
         pairs = run_parallel(n_jobs, [lambda p=p: front.fit_pair(lead, p) for p in partners],
                              "pairs")
         for f in pairs:
@@ -167,7 +169,8 @@ def _without_linear_members(front, fits, E0, cmp0, rule, tick) -> list:
                    if c.effects and c.effects not in tested]:
         fit = todo[0]
         tested.add(fit.effects)
-        alts = front.linear_forms(fit)
+        with phase("linear form of " + "+".join(fit.effects)):
+            alts = front.linear_forms(fit)
         if not alts:
             continue
         tick("effect or model error: " + "+".join(fit.effects))
@@ -206,7 +209,8 @@ def recheck_setting(front: FrontEnd, verdict, ranking: list, E0: float, cmp0, ru
     fit = verdict.named
     if fit is None or not fit.details.get("discrete_settings"):
         return verdict, ranking
-    out = front.recheck_setting(fit)
+    with phase("other settings of " + "+".join(fit.effects)):
+        out = front.recheck_setting(fit)
     if not out:
         return verdict, ranking
     entries, better = out

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 from joblib import cpu_count
 
+from .._progress import evaluated
 from ..orders import record_features, stack_features
 from ..rotor import RotorBearingSimulator, RotorParameters
 
@@ -140,6 +141,7 @@ class SweepModel:
                                            settle=self.settle_s if state is None
                                            else self.lead_s, state=state)
                 Y = np.column_stack([run[c] for c in self.channels])
+                evaluated()
                 return then((w, run["t"], Y))
             except Exception as exc:  # noqa: BLE001 -- handed to the point's caller
                 return exc
