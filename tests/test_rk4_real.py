@@ -52,6 +52,9 @@ def test_the_issue_command_reads_the_same_file():
 
 def test_keys_and_files(diagnosis):
     doc, out = diagnosis
+    # the example calls the command line with its own arguments; the report records the
+    # command that reproduces it, not the example's argv ("sknarx rk4-out")
+    assert doc["command"].startswith("sknarx gap --measured ") and "--rotor" in doc["command"]
     for key in ("verdict", "ranking", "where", "shrink", "nominal_calibration", "limits",
                 "located", "gap_by_band", "response_model", "remaining"):
         assert key in doc

@@ -193,3 +193,13 @@ def test_every_file_the_package_writes_is_written_whole_or_not_at_all():
                 if any(set(m) & set("wax+") for m in modes):
                     offenders.append(f"{path.name}:{node.lineno} open({modes[0]!r})")
     assert not offenders, offenders
+
+
+def test_what_a_user_reads_points_at_shipped_data_not_the_projects_shared_folder():
+    """A clone or an installed package has no ``../shared``: README, docs and examples
+    name the shipped files (``sknarx datasets path NAME``, ``sknarx.datasets``)."""
+    root = PKG.parent
+    pages = [root / "README.md", *(root / "docs").glob("*.md"),
+             *(root / "examples").rglob("*.py")]
+    offenders = [str(p.relative_to(root)) for p in pages if "../shared" in p.read_text()]
+    assert not offenders, offenders

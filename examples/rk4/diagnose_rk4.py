@@ -3,10 +3,13 @@
 The run-up ships with sknarx (``sknarx.datasets.load_rk4_runup``), so this runs in any
 clone, from any folder:
     python examples/rk4/diagnose_rk4.py [OUT]
-It is the same as, from the repository root of a checkout with ``../shared`` beside it,
-    sknarx gap --measured ../shared/data/rk4-runup/runup_bode.csv \\
+It is the same as, from the repository root,
+    sknarx gap --measured "$(sknarx datasets path rk4-runup)" \\
                --rotor examples/rk4/rotor.toml --out rk4-out
-(the shipped file is byte-identical). About a minute and a half on two cores.
+and records that command in its report. About one to one and a half minutes on a
+2-core machine (61 s measured inside the test suite): the run-up is too fast to be
+quasi-steady, so each bearing calibration and effect fit simulates the order-tracked
+run-up response, hundreds of times in all.
 """
 
 import sys

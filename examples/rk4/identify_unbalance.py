@@ -3,10 +3,10 @@
 The campaign ships with sknarx (``sknarx.datasets.load_rk4_unbalance``), so this runs in
 any clone, from any folder:
     python examples/rk4/identify_unbalance.py [OUT]
-It is the same as, from the repository root of a checkout with ``../shared`` beside it,
-    sknarx unbalance --features ../shared/data/rk4-unbalance/features_1x.csv \\
+It is the same as, from the repository root,
+    sknarx unbalance --features "$(sknarx datasets path rk4-unbalance)" \\
                      --rotor examples/rk4/rotor.toml --out ub-out
-(the shipped file is byte-identical). About 80 s on two cores: most of it is the
+About 80 s on two cores: most of it is the
 leave-one-condition-out cross-validation against the influence-coefficient and
 random-forest peers. Then it prints the cross-validated scores and the predictions.
 """
