@@ -37,19 +37,19 @@ class VerdictRule:
         Stated, not fitted.
     min_shrink : float, default=0.6
         Share of the held-out gap above the noise a named effect removes: it explains
-        most of the gap. Fitted on the own family's pilot trials.
+        most of the gap. Tuned: see docs/gap.md, *The verdict rule*.
     min_log_shrink : float, default=0.3
         Share of ``sum(log(1 + excess))`` a named effect removes: it explains the gap
         broadly, not its few largest features only (waived where the effect leaves no
-        more than the floor). Fitted on the own family's pilot trials.
+        more than the floor). Tuned: see docs/gap.md, *The verdict rule*.
     pair_trigger : float, default=0.5
         A pair may be named only where the best single leaves more than this held-out
-        excess per feature. Fitted on the own family's pilot trials.
+        excess per feature. Tuned: see docs/gap.md, *The verdict rule*.
     min_gain : float, default=0.3
         Share of what a simpler candidate leaves that a richer one must remove to be
         preferred: a pair over its lead, an effect over its linear form (a change of
-        the linear rotor, which is model error). Fitted on the own family's pilot
-        trials for pairs; the same share for the linear form.
+        the linear rotor, which is model error). Tuned for pairs (docs/gap.md,
+        *The verdict rule*); the same share for the linear form.
     rtol : float, default=0.01
         Share of its size to which two descriptions of one rotor agree on a vector
         beyond noise: a calibrated model's 1x and the rig's (the model-form error no
