@@ -25,9 +25,10 @@ plt.rcParams.update({
 })
 
 
-def save(fig, path) -> Path:
-    """Write ``fig`` as PNG and close it."""
-    fig.tight_layout()
+def save(fig, path, rect=(0, 0, 1, 1)) -> Path:
+    """Write ``fig`` as PNG and close it; the axes are laid out inside ``rect`` (figure
+    fractions: room left outside it for a figure legend)."""
+    fig.tight_layout(rect=rect)
     path = write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
     return path

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.ticker import FuncFormatter
 
 from ..orders import spectrum
 from ..plotting import correlation_tests_figure, plt, save
@@ -100,20 +101,27 @@ def make_figures(st, out: Path) -> dict:
     ax.legend(fontsize=7)
     figs["cv"] = save(fig, out / "cv_error_vs_speed.png")
 
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 4.6), sharex=True)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.4), sharex=True)
     r = st.runup
-    a1.plot(r["t"], r["y"] * um, "k", lw=0.6, alpha=0.5, label="simulator (true)")
     for name in ("improved-spline", "paper"):
         a1.plot(r["t"], r[name] * um, lw=0.5, **_style(name))
+    # the truth last and on top, so the models' traces do not hide it
+    a1.plot(r["t"], r["y"] * um, "k", lw=0.5, label="simulator (true)", zorder=5)
     a1.set(ylabel=f"{c.output} (mm)", title="Run-up through the critical speed")
-    a1.legend(fontsize=7, loc="upper right")
     for name in ("improved-spline", "improved", "paper"):
         a2.semilogy(r["t"], np.abs(r[name] - r["y"]) * um + 1e-9, lw=0.5, **_style(name))
-    a2.set(xlabel="t (s)", ylabel="|error| (mm)")
+    a2.set(xlabel="t (s)", ylabel="|model - true| (mm)")
     ax2 = a1.twinx()
-    ax2.plot(r["t"], r["speed"], "r", lw=0.6)
+    ax2.plot(r["t"], r["speed"], "r", lw=0.8, label="speed (right axis)")
     ax2.set_ylabel("speed (rad/s)", color="r")
-    figs["runup"] = save(fig, out / "runup.png")
+    # one legend for both panels, below them, covering no data
+    handles = {}
+    for ax in (a1, ax2, a2):
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=3, fontsize=7,
+               frameon=False)
+    figs["runup"] = save(fig, out / "runup.png", rect=(0, 0.07, 1, 1))
 
     model = st.models["improved"]
     spl = st.models["improved-spline"]
@@ -135,7 +143,16 @@ def make_figures(st, out: Path) -> dict:
             ax.plot(grid, sp[:, k], "g-", lw=0.8)
             ax.fill_between(grid, sp[:, k] - 1.96 * sp_sd[:, k], sp[:, k] + 1.96 * sp_sd[:, k],
                             color="g", alpha=0.15, lw=0)
-        ax.set_title(term, fontsize=8)
+        # the power of ten in the title, not in an offset label that collides with it
+        ax.yaxis.get_major_formatter().set_useOffset(False)
+        top = float(np.nanmax(np.abs(model.coef_per_speed_[term]))) or 1.0
+        power = int(np.floor(np.log10(top)))
+        if abs(power) >= 3:
+            ax.yaxis.set_major_formatter(FuncFormatter(
+                lambda v, _, p=power: f"{v / 10 ** p:g}"))
+            ax.set_title(f"{term}  (x 1e{power})", fontsize=8)
+        else:
+            ax.set_title(term, fontsize=8)
         ax.tick_params(labelsize=6)
     fig.suptitle("Coefficients against speed: per-speed (dots, 95 % intervals), cubic (blue) "
                  "and spline (green) with 95 % confidence bands", fontsize=9)
