@@ -71,7 +71,7 @@ def make_figures(st, out: Path) -> dict:
         figs[f"fig{n}"] = save(fig, out / f"fig{n}_response_{w:g}.png")
 
     for n, w in zip((8, 9, 10), c.validation_speeds, strict=True):
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(8.5, 3))
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(8.5, 3.4))
         tr = st.validation_traces[("improved-spline", float(w))]
         t, y, half = tr["t"], tr["y"], tr["half"]
         sl = slice(half, half + 300)
@@ -80,7 +80,9 @@ def make_figures(st, out: Path) -> dict:
             trm = st.validation_traces[(name, float(w))]
             a1.plot(t[sl], trm["y_rest"][sl] * um, lw=0.9, **_style(name))
         a1.set(xlabel="t (s)", ylabel=f"{c.output} (mm)", title=f"(a) time, {w} rad/s")
-        a1.legend(fontsize=7)
+        # below both panels: inside (a) it covered the traces
+        fig.legend(*a1.get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
+                   frameon=False)
         f, a = spectrum(y[half:], c.fs)
         a2.semilogy(f, a * um, "k", lw=2, alpha=0.4)
         for name in ("improved-spline", "paper"):
@@ -90,7 +92,8 @@ def make_figures(st, out: Path) -> dict:
                 a2.semilogy(fh, ah * um, lw=0.8, **_style(name, label=False))
         a2.set(xlim=(0, 200), ylim=(1e-7, None), xlabel="frequency (Hz)",
                ylabel="amplitude (mm)", title="(b) spectrum")
-        figs[f"fig{n}"] = save(fig, out / f"fig{n}_validation_{w:g}.png")
+        figs[f"fig{n}"] = save(fig, out / f"fig{n}_validation_{w:g}.png",
+                               rect=(0, 0.08, 1, 1))
 
     fig, ax = plt.subplots(figsize=(6.5, 3.4))
     for name, g in st.cv.groupby("method"):
