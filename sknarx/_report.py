@@ -28,7 +28,8 @@ td,th{border:1px solid #ccc;padding:3px 7px;text-align:right;vertical-align:top}
 th{background:#f3f3f3}td:first-child{text-align:left}.ok{color:#070;font-weight:bold}
 .bad{color:#b00;font-weight:bold}.note{color:#555;font-size:0.9em}figure{margin:1em 0}
 img{max-width:100%}figcaption{font-size:0.85em;color:#555}code{background:#f4f4f4;
-padding:1px 4px}h2{border-bottom:1px solid #ddd}.prov{font-size:0.8em;color:#555}"""
+padding:1px 4px}h2{border-bottom:1px solid #ddd}.prov{font-size:0.8em;color:#555}
+table.nowrap td{white-space:nowrap}"""
 
 
 def _commit() -> str | None:
@@ -86,15 +87,17 @@ def page(title: str, body: str, prov: dict) -> str:
             f"{provenance_html(prov)}{body}</body></html>")
 
 
-def table(rows, headers, empty: str = "") -> str:
-    """An HTML table of already-formatted cells; ``empty`` explains a table with no rows."""
+def table(rows, headers, empty: str = "", nowrap: bool = False) -> str:
+    """An HTML table of already-formatted cells; ``empty`` explains a table with no rows;
+    ``nowrap`` keeps each cell on one line (model terms such as ``y(t-1)*u(t-3)``)."""
     rows = list(rows)
     if not rows:
         return f'<p class="note">{html.escape(empty or "Nothing to show.")}</p>'
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in headers)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
                    for r in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    cls = ' class="nowrap"' if nowrap else ""
+    return f"<table{cls}><tr>{head}</tr>{body}</table>"
 
 
 def figure(path, caption: str = "") -> str:

@@ -67,3 +67,12 @@ def test_an_output_is_written_whole_or_not_at_all(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_a_table_of_model_terms_keeps_each_term_on_one_line():
+    from sknarx._report import CSS, table
+
+    html = table([["y(t-1)*u(t-2)*u(t-3)", "1e-10"]], ["term", "coef"], nowrap=True)
+    assert html.startswith('<table class="nowrap">')
+    assert "table.nowrap td{white-space:nowrap}" in CSS
+    assert table([["a"]], ["h"]).startswith("<table><tr>")

@@ -127,14 +127,14 @@ def _fmt(x, pct=False, digits=3):
     return f"{100 * x:.{digits - 1}f} %" if pct else f"{x:.{digits}g}"
 
 
-def _df_html(df, pct_cols=(), digits=3):
+def _df_html(df, pct_cols=(), digits=3, nowrap=False):
     """A DataFrame as the shared report table, floats formatted (percent where asked)."""
     def cell(col, v):
         return _fmt(float(v), col in pct_cols, digits) if isinstance(v, (float, np.floating)) \
             else v
 
     return table(([cell(c, r[c]) for c in df.columns] for _, r in df.iterrows()),
-                 list(df.columns))
+                 list(df.columns), nowrap=nowrap)
 
 
 def _img(figs, key, caption):
@@ -215,7 +215,7 @@ natural frequency. The model's matrices, assumptions and the cross-check against
 that omega*dt is 0.08-0.28 rad and the ERR ranking stays numerically meaningful - see
 <code>docs/user_guide.md</code>). Input u = m e omega^2 cos(omega t) of disk O1 (N), output
 x of disk O1 (m).</p>
-{_df_html(_table3_view(st.models[RECOMMENDED]))}
+{_df_html(_table3_view(st.models[RECOMMENDED]), nowrap=True)}
 <p>Selected terms of the paper's method on steady data: {html.escape(paper_terms)}.
 Differences from the paper's Table 3: the first three autoregressive terms agree (the
 paper: y(t-1), y(t-2), y(t-3)); the paper's AERR values after step 3 (1e-13 %) are at the
