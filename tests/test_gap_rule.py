@@ -186,7 +186,7 @@ def test_every_parameter_of_the_rule_is_documented_with_how_it_was_set():
     for name in VerdictRule().to_dict():
         block = doc.split(f"    {name} :")[1].split("\n    ")[0:6]
         text = " ".join(block)
-        assert any(w in text for w in ("Stated", "Fitted", "Measured", "measured")), name
+        assert any(w in text for w in ("Stated", "Tuned", "Measured", "measured")), name
 
 
 # ---------------------------------------------- each default against its meaning
