@@ -77,7 +77,7 @@ def test_what_remains_is_reported_where_the_corrected_model_still_disagrees(diag
     # where the verdict is, as the time-series report does
     from html import escape
 
-    from sknarx.gap.report import alike_text
+    from sknarx.gap.report_text import alike_text
 
     alike = alike_text(doc["verdict"]).strip()
     assert "runout" in doc["verdict"] and alike
