@@ -99,3 +99,24 @@ def test_percentages_are_never_rounded_up_to_a_whole_they_are_short_of():
     assert aerr_text(99.99999988) == "99.9999999 %"  # the issue's "100.000000 %"
     assert percentage(99.96, 1) == "99.96 %" and percentage(100.0, 1) == "100.0 %"
     assert percentage(12.34) == "12.3 %"
+
+
+def test_a_panel_of_tiny_coefficients_carries_its_power_in_the_title_not_an_offset():
+    """The issue's collision: matplotlib's '1e-8' offset label sat on the panel title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from sknarx.plotting import plt
+    from sknarx.reproduce.figures import _scaled_title
+
+    fig, (a, b) = plt.subplots(1, 2)
+    values = np.array([-5.4e-8, -2.9e-8, -4.0e-8])
+    a.plot(values)
+    assert _scaled_title(a, "u(t-3)", values) == -8
+    fig.canvas.draw()
+    assert a.get_title() == "u(t-3)  (x 1e-8)"
+    assert a.yaxis.get_offset_text().get_text() == ""
+    assert all("e" not in t.get_text() for t in a.get_yticklabels())
+    b.plot([2.3, 2.8])
+    assert _scaled_title(b, "y(t-1)", np.array([2.3, 2.8])) == 0 and b.get_title() == "y(t-1)"
+    plt.close(fig)

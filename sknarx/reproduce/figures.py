@@ -146,16 +146,7 @@ def make_figures(st, out: Path) -> dict:
             ax.plot(grid, sp[:, k], "g-", lw=0.8)
             ax.fill_between(grid, sp[:, k] - 1.96 * sp_sd[:, k], sp[:, k] + 1.96 * sp_sd[:, k],
                             color="g", alpha=0.15, lw=0)
-        # the power of ten in the title, not in an offset label that collides with it
-        ax.yaxis.get_major_formatter().set_useOffset(False)
-        top = float(np.nanmax(np.abs(model.coef_per_speed_[term]))) or 1.0
-        power = int(np.floor(np.log10(top)))
-        if abs(power) >= 3:
-            ax.yaxis.set_major_formatter(FuncFormatter(
-                lambda v, _, p=power: f"{v / 10 ** p:g}"))
-            ax.set_title(f"{term}  (x 1e{power})", fontsize=8)
-        else:
-            ax.set_title(term, fontsize=8)
+        _scaled_title(ax, term, model.coef_per_speed_[term])
         ax.tick_params(labelsize=6)
     fig.suptitle("Coefficients against speed: per-speed (dots, 95 % intervals), cubic (blue) "
                  "and spline (green) with 95 % confidence bands", fontsize=9)
@@ -185,6 +176,21 @@ def make_figures(st, out: Path) -> dict:
     ax.legend(fontsize=7, loc="upper left")
     figs["campbell"] = save(fig, out / "campbell.png")
     return figs
+
+
+def _scaled_title(ax, title, values) -> int:
+    """Title ``ax`` and put the values' power of ten into the title ("u(t-3) (x 1e-8)")
+    instead of an offset label over the axes, where it collides with the title; returns
+    the power (0: none shown)."""
+    ax.yaxis.get_major_formatter().set_useOffset(False)
+    top = float(np.nanmax(np.abs(values))) if len(values) else 0.0
+    power = int(np.floor(np.log10(top))) if top > 0 and np.isfinite(top) else 0
+    if abs(power) < 3:
+        ax.set_title(title, fontsize=8)
+        return 0
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _, p=power: f"{v / 10 ** p:g}"))
+    ax.set_title(f"{title}  (x 1e{power})", fontsize=8)
+    return power
 
 
 def _style(name, label=True):
