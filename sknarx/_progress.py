@@ -18,6 +18,7 @@ import contextlib
 import logging
 import sys
 import threading
+import time
 
 from tqdm.auto import tqdm
 
@@ -82,8 +83,10 @@ def _register(bar) -> None:
 
 
 def _tick_loop() -> None:
-    stop = threading.Event()
-    while not stop.wait(REFRESH_S):
+    """Redraw every open bar each :data:`REFRESH_S` s, for the life of the process (a
+    daemon thread: it never keeps the interpreter from exiting)."""
+    while True:
+        time.sleep(REFRESH_S)
         with _lock:
             bars = list(_open)
         for bar in bars:
