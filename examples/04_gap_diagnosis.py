@@ -6,6 +6,7 @@ Run: python examples/04_gap_diagnosis.py
 import numpy as np
 
 from sknarx.gap import diagnose
+from sknarx.gap.report_text import effect_parameters
 from sknarx.testing import make_trial
 
 # A 'rig' with slow-roll runout, a few percent of stiffness/damping/unbalance mismatch,
@@ -18,6 +19,10 @@ result = diagnose(measured, candidates=("runout", "crack", "anisotropy"))
 print("verdict:", result["verdict"],
       f"- {100 * result['shrink']:.0f} % of the held-out gap removed")
 for r in result["ranking"]:
-    print(f"  {str(r['effect']):28s} shrink {r['shrink']:6.2f}  params {r['params']}")
-print("where:", result["where"][:2])
+    name = r["effect"] if isinstance(r["effect"], str) else " + ".join(r["effect"])
+    print(f"  {name:24s} {100 * r['shrink']:6.1f} % removed; "
+          f"{effect_parameters(r['effect'], r['params'])}")
+for w in result["where"][:2]:
+    print(f"where: {w['order']} at {w['channel']} ({w['window']}), "
+          f"{100 * w['share']:.1f} % of the gap")
 print("withheld truth:", truth["effects"])

@@ -76,3 +76,24 @@ def test_a_table_of_model_terms_keeps_each_term_on_one_line():
     assert html.startswith('<table class="nowrap">')
     assert "table.nowrap td{white-space:nowrap}" in CSS
     assert table([["a"]], ["h"]).startswith("<table><tr>")
+
+
+def test_a_legend_below_the_axes_covers_no_data(tmp_path):
+    """The issue's legends sat on the traces (RK-4 polar plot, fig9): a figure legend
+    laid out below every axes, for one row of entries and for several."""
+    from sknarx.plotting import legend_below, plt, save
+
+    for n_lines, ncol in ((3, 3), (7, 2)):
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(5, 4))
+        for k in range(n_lines):
+            a1.plot([0, 1], [k, k + 1], label=f"trace {k}")
+        a2.plot([0, 1], [1, 0])
+        save(fig, tmp_path / "f.png", rect=legend_below(fig, a1, ncol=ncol))
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        legend = fig.legends[0].get_window_extent(renderer)
+        for ax in (a1, a2):
+            box = ax.get_tightbbox(renderer)
+            assert legend.y1 <= box.y0 + 1, (n_lines, ncol)
+        assert legend.y0 >= 0

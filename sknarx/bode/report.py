@@ -12,7 +12,7 @@ import pandas as pd
 from .._report import figure, page, provenance, quantity, table, value_range
 from ..gap.report_text import alike_text, verdict_text
 from ..io import json_safe, write_atomic, write_text_atomic
-from ..plotting import plt, save
+from ..plotting import legend_below, plt, save
 
 __all__ = ["figures", "html_report", "write_bode_outputs"]
 
@@ -52,21 +52,20 @@ def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None, z2=None, label=N
         a1.semilogy(rpm, np.abs(s) * 1e6, style, lw=1, label=name)
         a2.plot(rpm, np.degrees(np.angle(s)), style, lw=1)
     a2.plot(rpm, np.degrees(np.angle(z)), "k.", ms=3)
-    a1.set(ylabel="1x amplitude (um, 0-pk)", title="Bode plot: measured, nominal, corrected")
-    a1.legend(fontsize=7)
+    a1.set(ylabel="1x amplitude (µm, 0-pk)",
+           title="Bode plot: measured, nominal, corrected")
     a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
-    figs = {"bode": save(fig, out / "bode.png")}
+    figs = {"bode": save(fig, out / "bode.png", rect=legend_below(fig, a1, ncol=2))}
     crit = float(doc["nominal_calibration"]["first_critical_rpm"]["calibrated"])
     fig, ax = plt.subplots(figsize=(5, 5))
     sel = rpm < 1.5 * crit  # through the first critical; the plateau above crowds the origin
     ax.plot(z.real[sel] * 1e6, z.imag[sel] * 1e6, "k.", ms=3, label="measured")
     for s, style, name in ((s_cal, "b--", "nominal, calibrated"), (s_best, "r-", "corrected")):
         ax.plot(s.real[sel] * 1e6, s.imag[sel] * 1e6, style, lw=1, label=name)
-    ax.set(xlabel="Re 1x (um)", ylabel="Im 1x (um)",
+    ax.set(xlabel="Re 1x (µm)", ylabel="Im 1x (µm)",
            title=f"Polar plot (below {1.5 * crit:.0f} rpm)")
     ax.set_aspect("equal")
-    ax.legend(fontsize=7)
-    figs["polar"] = save(fig, out / "polar.png")
+    figs["polar"] = save(fig, out / "polar.png", rect=legend_below(fig, ax))
     if s_quasi is not None:
         sel = (rpm > 0.85 * crit) & (rpm < 1.3 * crit)
         fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
@@ -78,11 +77,11 @@ def figures(out, bins, s_nom, s_cal, s_best, doc, s_quasi=None, z2=None, label=N
         a2.plot(rpm[sel], np.degrees(np.angle(z[sel])), "k.-", ms=4, lw=0.5)
         for b in doc["response_model"].get("beat_minima_expected_rpm", []):
             a1.axvline(b, color="0.6", lw=0.6, ls=":")
-        a1.set(ylabel="1x amplitude (um, 0-pk)",
+        a1.set(ylabel="1x amplitude (µm, 0-pk)",
                title="Through the critical: the sweep's beat (dotted: expected minima)")
-        a1.legend(fontsize=7)
         a2.set(xlabel="speed (rpm)", ylabel="phase (deg)")
-        figs["runup"] = save(fig, out / "runup_zoom.png")
+        figs["runup"] = save(fig, out / "runup_zoom.png",
+                             rect=legend_below(fig, a1, ncol=3))
     if z2:
         figs["residual"] = _residual_figure(out, rpm, z2, doc)
     return figs
@@ -96,13 +95,12 @@ def _residual_figure(out, rpm, z2, doc):
         ax.semilogy(rpm, np.clip(v, 1e-2, None), style, ms=3, label=name)
     thr = doc["significant_z2"]
     ax.axhline(thr, color="0.4", lw=0.8, ls="--",
-               label=f"{thr:g}: significant (p = {np.exp(-thr / 2):.3f} if the model is right)")
+               label=f"{thr:.2f}: significant (p = {np.exp(-thr / 2):.3f} if the model is right)")
     for r in doc.get("remaining", [])[:4]:
         ax.axvspan(*r["rpm_range"], color="orange", alpha=0.15, lw=0)
     ax.set(xlabel="speed (rpm)", ylabel="|z - model|^2 / variance",
            title="What remains after the diagnosis (shaded: remaining regions)")
-    ax.legend(fontsize=7)
-    return save(fig, out / "residual.png")
+    return save(fig, out / "residual.png", rect=legend_below(fig, ax))
 
 
 def html_report(doc, figs):

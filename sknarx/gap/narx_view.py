@@ -56,10 +56,10 @@ def narx_view(measured, simulated, channel, base, ny=2, nu=2, degree=2, max_term
         "only_measured": [t for t in m.selected_terms_ if t not in s.selected_terms_],
         "only_simulated": [t for t in s.selected_terms_ if t not in m.selected_terms_],
         "max_relative_coefficient_difference": curves,
-        "reading": ("nonlinear terms selected only for the measurement ("
+        "reading": ("Nonlinear terms selected only for the measurement ("
                     + ", ".join(nonlinear) + "): a candidate harmonic source the simulator "
-                    "lacks; whether it matters is the gap diagnosis's call, not this view's")
-        if nonlinear else "no nonlinear term is specific to the measured model",
+                    "lacks; whether it matters is the gap diagnosis's call, not this view's.")
+        if nonlinear else "No nonlinear term is specific to the measured model.",
         "_models": models,
     }
 

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.ticker import FuncFormatter
 
 from ..orders import spectrum
-from ..plotting import correlation_tests_figure, plt, save
+from ..plotting import correlation_tests_figure, legend_below, plt, save
 
 MODEL_STYLE = {
     "paper": dict(color="tab:red", ls="--", label="paper's method (steady data, cubic)"),
@@ -80,9 +80,7 @@ def make_figures(st, out: Path) -> dict:
             trm = st.validation_traces[(name, float(w))]
             a1.plot(t[sl], trm["y_rest"][sl] * um, lw=0.9, **_style(name))
         a1.set(xlabel="t (s)", ylabel=f"{c.output} (mm)", title=f"(a) time, {w} rad/s")
-        # below both panels: inside (a) it covered the traces
-        fig.legend(*a1.get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
-                   frameon=False)
+        rect = legend_below(fig, a1)  # inside (a) it covered the traces
         f, a = spectrum(y[half:], c.fs)
         a2.semilogy(f, a * um, "k", lw=2, alpha=0.4)
         for name in ("improved-spline", "paper"):
@@ -92,8 +90,7 @@ def make_figures(st, out: Path) -> dict:
                 a2.semilogy(fh, ah * um, lw=0.8, **_style(name, label=False))
         a2.set(xlim=(0, 200), ylim=(1e-7, None), xlabel="frequency (Hz)",
                ylabel="amplitude (mm)", title="(b) spectrum")
-        figs[f"fig{n}"] = save(fig, out / f"fig{n}_validation_{w:g}.png",
-                               rect=(0, 0.08, 1, 1))
+        figs[f"fig{n}"] = save(fig, out / f"fig{n}_validation_{w:g}.png", rect=rect)
 
     fig, ax = plt.subplots(figsize=(6.5, 3.4))
     for name, g in st.cv.groupby("method"):
@@ -122,9 +119,8 @@ def make_figures(st, out: Path) -> dict:
     for ax in (a1, ax2, a2):
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=3, fontsize=7,
-               frameon=False)
-    figs["runup"] = save(fig, out / "runup.png", rect=(0, 0.07, 1, 1))
+    figs["runup"] = save(fig, out / "runup.png",
+                         rect=legend_below(fig, handles=list(handles.values())))
 
     model = st.models["improved"]
     spl = st.models["improved-spline"]

@@ -9,7 +9,7 @@ import numpy as np
 
 from .._report import figure, page, provenance, quantity, table
 from ..io import json_safe, write_atomic, write_text_atomic
-from ..plotting import plt, save
+from ..plotting import legend_below, plt, save
 from .study import UnbalanceStudy
 
 __all__ = ["write_unbalance_outputs"]
@@ -59,11 +59,10 @@ def _figures(out, model, blind, U):
         ax.axis("off")
     handles = [plt.Line2D([], [], color=colors[j % len(colors)], label=f"{s} {p}")
                for j, (s, p) in enumerate(chans)]
-    fig.legend(handles=handles, loc="lower center", ncol=len(chans), fontsize=7)
+    rect = legend_below(fig, handles=handles, ncol=len(chans))
     fig.suptitle("Unlabelled conditions: measured response change (lines, mils) and the "
                  "identified unbalance's prediction (x)", fontsize=9)
-    fig.subplots_adjust(bottom=0.18, hspace=0.35)
-    return {"polar": save(fig, out / "polar_unlabelled.png")}
+    return {"polar": save(fig, out / "polar_unlabelled.png", rect=rect)}
 
 
 _PARAM_UNITS = {"k": "N/m", "c": "N s/m", "angle": "deg", "sensitivity": "-",
