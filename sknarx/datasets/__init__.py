@@ -1,6 +1,6 @@
-"""Real measured rotor data that ship with sknarx, with their licence and provenance.
+"""Real measured data that ship with sknarx, with their licence and provenance.
 
-Both come from a Bently Nevada RK-4 two-disk rotor kit (M. Nouioua, rotor unbalance
+The rotor data come from a Bently Nevada RK-4 two-disk rotor kit (M. Nouioua, rotor unbalance
 estimation on a Bently Nevada RK-4 rotor kit, doi:10.5281/zenodo.23152815; files
 copied unchanged from the repository M-Nouioua/rk4-rotor-unbalance-estimation at
 commit f3fd3be0, MIT licence; raw recordings CC BY 4.0). Each loader returns a
@@ -10,6 +10,9 @@ conventions, what is known to be in the data) and ``license`` the licence text.
 The data stay in their native units, as recorded: the run-up in rpm and volts, the
 unbalance campaign in mils and g mm. The loaders say so; convert with the factors
 given there (1 V = 127 um = 5 mils at the proximitor output).
+
+The Silverbox circuit (Wigren & Schoukens 2013) is the standard real benchmark of
+nonlinear system identification: a NARX model that holds there holds on measured data.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from importlib import resources
 import pandas as pd
 from sklearn.utils import Bunch
 
-__all__ = ["load_rk4_runup", "load_rk4_unbalance", "data_path", "dataset_path", "DATASETS"]
+__all__ = ["load_rk4_runup", "load_rk4_unbalance", "load_silverbox", "data_path",
+           "dataset_path", "DATASETS"]
 
 #: the shipped datasets by the name the command line takes: (folder, data file, what it is)
 DATASETS = {
@@ -27,7 +31,18 @@ DATASETS = {
                   "RK-4 rotor kit run-up, order-tracked 1x per revolution (sknarx gap)"),
     "rk4-unbalance": ("rk4_unbalance", "features_1x.csv",
                       "RK-4 two-plane unbalance campaign, 1x vectors (sknarx unbalance)"),
+    "silverbox": ("silverbox", "SNLS80mV.csv",
+                  "Silverbox circuit, input and output voltages (NARX benchmark)"),
 }
+
+#: Silverbox sampling frequency (Hz): 10^7 / 2^14
+SILVERBOX_FS = 1e7 / 2**14
+#: Silverbox rows (start, stop) of the test arrow, the estimation multisines and the
+#: range of the arrow whose amplitude stays within the estimation data
+_SILVERBOX_TEST = (100, 40500)
+_SILVERBOX_ESTIMATION = (40500, 127420)
+_SILVERBOX_MULTISINE = (460, 8192, 40)  # transient, steady, trailing samples
+
 
 
 def data_path(dataset: str, filename: str):
@@ -122,3 +137,46 @@ def load_rk4_unbalance() -> Bunch:
     return Bunch(frame=pd.read_csv(path), filename=str(path),
                  DESCR=_text("rk4_unbalance", "PROVENANCE.md"),
                  license=_text("rk4_unbalance", "LICENSE"))
+
+
+def load_silverbox() -> Bunch:
+    """The Silverbox circuit: the standard real benchmark of nonlinear identification.
+
+    An electronic Duffing-type oscillator (``m y'' + d y' + (a + b y^2) y = u``) driven
+    by voltage ``V1`` with response ``V2``, sampled at 610.35 Hz (Wigren & Schoukens,
+    ECC 2013; see ``DESCR``).
+
+    Returns
+    -------
+    Bunch
+        ``frame``: the whole file as a DataFrame with columns ``V1`` (input, V) and
+        ``V2`` (output, V), 131,072 rows;
+        ``estimation``: list of the 10 multisine realisations, each a DataFrame of
+        8,692 rows (460 transient samples, which serve as lag history, then the 8,192
+        steady ones and 40 trailing), columns ``V1``, ``V2``;
+        ``test``: the test arrow, rows 100-40,499 of the file (40,400 rows);
+        ``steady_start``: 460, the first steady sample of each realisation;
+        ``within_range``: 30,000, the number of arrow samples whose amplitude stays
+        within the estimation data (the quoted figures discard the first 100 of them);
+        ``fs``: sampling frequency (Hz); ``filename``; ``DESCR``; ``license``.
+
+    Examples
+    --------
+    >>> from sknarx.datasets import load_silverbox
+    >>> sb = load_silverbox()
+    >>> len(sb.estimation), sb.estimation[0].shape, sb.test.shape
+    (10, (8692, 2), (40400, 2))
+    >>> round(sb.fs, 2)
+    610.35
+    """
+    path = data_path("silverbox", "SNLS80mV.csv")
+    frame = pd.read_csv(path, usecols=["V1", "V2"])
+    a, b = _SILVERBOX_ESTIMATION
+    n = sum(_SILVERBOX_MULTISINE)
+    estimation = [frame.iloc[i:i + n].reset_index(drop=True) for i in range(a, b, n)]
+    test = frame.iloc[slice(*_SILVERBOX_TEST)].reset_index(drop=True)
+    return Bunch(frame=frame, estimation=estimation, test=test,
+                 steady_start=_SILVERBOX_MULTISINE[0], within_range=30000,
+                 fs=SILVERBOX_FS, filename=str(path),
+                 DESCR=_text("silverbox", "PROVENANCE.md"),
+                 license=_text("silverbox", "LICENSE"))

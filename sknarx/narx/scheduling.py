@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import warnings
 from dataclasses import dataclass
+from itertools import chain
 from numbers import Integral, Real
 from pathlib import Path
 
@@ -18,9 +19,12 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._atomic import write_text_atomic
 from .._json import json_safe
+from .._progress import phase
 from ._design import check_nan_rows, read_term_matrix
 from ._els import extended_least_squares
 from ._orthogonal import coef_covariance, compress, termset_blocks
+from ._output_error import refine_output_error
+from ._simulation_selection import select_by_simulation
 from ._speed_map import raw_power_map, speed_weights
 from ._state import check_document, model_state, restore_state
 from .freerun import FreeRunDivergenceError, free_run
@@ -137,6 +141,20 @@ def _with_noise_model(fitted: _Fit, els, y_list, process=None, noise_pos=None) -
                 speeds=fitted.speeds, n_iter=els.n_iter)
 
 
+def _n_records(X) -> int:
+    if isinstance(X, tuple) and len(X) == 2 and np.ndim(X[0]) == 1:
+        return 1
+    return len(X)
+
+
+def _group_by_speed(datasets):
+    """``[(speed, [(index, dataset), ...]), ...]`` in order of first appearance."""
+    groups: dict = {}
+    for k, d in enumerate(datasets):
+        groups.setdefault(d.speed, []).append((k, d))
+    return list(groups.items())
+
+
 def _is_sweep(X) -> bool:
     if isinstance(X, pd.DataFrame):
         return "u" in X.columns
@@ -193,6 +211,28 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         that coloured noise gives NARX least squares. ``0`` is plain NARX. In a
         Pipeline, noise columns made by ``NarxTermDictionary(noise_lags=...)`` are
         estimated the same way (their selection is then the selector's).
+    selection : {'one_step', 'simulation'}, default='one_step'
+        How ``fit(datasets, speeds)`` chooses the terms. ``'one_step'``: AERR-based
+        EFOR on the one-step-ahead error (the paper's). ``'simulation'``: by the
+        free-run (simulation) error pooled over all records and speeds, starting from
+        the linear model and pruning terms the free run does not need (Piroddi &
+        Spinelli 2003, :mod:`sknarx.narx._simulation_selection`); no kept structure
+        diverges on its training records. ``esr`` and ``prune`` then do not apply;
+        ``max_terms`` (default 30) caps the search. On real data (the Silverbox
+        benchmark) it is the better choice.
+    refine : {None, 'output_error'}, default=None
+        ``'output_error'``: after selection, each speed's coefficients minimise the
+        free-run error of its records (Levenberg-Marquardt with exact sensitivities
+        through the recursion), and their covariance is the output-error one,
+        ``sigma^2 (J^T J)^-1``. ``None`` keeps the least-squares coefficients.
+    simulation_tol : float, default=0.01
+        ``selection='simulation'`` stops when the best further term lowers the pooled
+        simulation error by less than this share of it (1 %; set on the Silverbox
+        estimation data, see docs/decisions.md).
+    n_jobs : int or None, default=None
+        Parallel candidate evaluations of ``selection='simulation'`` (joblib threads;
+        the free run is compiled and releases the GIL). None: one, or the active
+        ``joblib.parallel_config``.
 
     Attributes
     ----------
@@ -263,6 +303,19 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
     ['u(t-1)', 'y(t-1)']
     >>> round(float(model.coefficients_at(175.0)[1]), 6)
     0.375
+
+    Records without a speed (one operating point, e.g. a circuit) share one set of
+    coefficients; here terms are chosen by free-run error and refined on it:
+
+    >>> u = rng.standard_normal(400); y = np.zeros(400)
+    >>> for t in range(2, 400):
+    ...     y[t] = 1.2 * y[t - 1] - 0.5 * y[t - 2] - 0.1 * y[t - 1] ** 3 + u[t - 1]
+    >>> m = SpeedScheduledNarx(ny=2, nu=1, degree=3, selection="simulation",
+    ...                        refine="output_error").fit([(u, y)])
+    >>> sorted(m.selected_terms_)
+    ['u(t-1)', 'y(t-1)', 'y(t-1)^3', 'y(t-2)']
+    >>> round(float(m.coefficients_at(0.0)[m.selected_terms_.index("y(t-1)^3")]), 6)
+    -0.1
     """
 
     _parameter_constraints = {
@@ -277,6 +330,10 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         "tol": [Interval(Real, 0, 1, closed="left")],
         "prune": ["boolean"],
         "noise_lags": [Interval(Integral, 0, None, closed="left")],
+        "selection": [StrOptions({"one_step", "simulation"})],
+        "refine": [StrOptions({"output_error"}), None],
+        "simulation_tol": [Interval(Real, 0, 1, closed="left")],
+        "n_jobs": [Integral, None],
     }
 
     def __init__(
@@ -292,6 +349,10 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         tol=1e-12,
         prune=True,
         noise_lags=0,
+        selection="one_step",
+        refine=None,
+        simulation_tol=0.01,
+        n_jobs=None,
     ):
         self.ny = ny
         self.nu = nu
@@ -304,6 +365,10 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.tol = tol
         self.prune = prune
         self.noise_lags = noise_lags
+        self.selection = selection
+        self.refine = refine
+        self.simulation_tol = simulation_tol
+        self.n_jobs = n_jobs
 
     # ------------------------------------------------------------------ fit
     def fit(self, X, y=None):
@@ -360,46 +425,107 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         return self
 
     def _fit_sweep(self, X, speeds) -> _Fit:
-        datasets = as_datasets(X, speeds)
-        ws = np.array([d.speed for d in datasets])
-        self._check_speeds(ws)
+        no_speeds = speeds is None and not isinstance(X, pd.DataFrame)
+        datasets = as_datasets(X, np.zeros(_n_records(X)) if no_speeds else speeds)
+        groups = _group_by_speed(datasets)  # records of one speed share coefficients
+        ws = None if no_speeds else np.array([w for w, _ in groups])
+        if ws is not None:
+            self._check_speeds(ws)
+        if self.refine == "output_error" and self.noise_lags > 0:
+            raise ValueError(
+                "refine='output_error' fits the free run, which has no noise terms; set "
+                "noise_lags=0 (or refine=None for a NARMAX model).")
         lag = max(self.ny, self.nu)
         termset = TermSet(monomial_exponents(self.ny, self.nu, self.degree), self.ny, self.nu)
         names_all = term_names(termset.exponents, self.ny, self.nu)
         width = len(names_all) + 1
-        Zs, norms, series, scale = [], [], [], 0.0
-        for k, d in enumerate(datasets):
-            where = f"Dataset {k} (speed {d.speed:g} rad/s)"
-            u, yk = check_series(d.u, d.y, d.speed, lag + 2, where)
-            if self.nu > 0 and self.degree > 0 and np.ptp(u) == 0:
-                raise ValueError(
-                    f"{where}: the input u is constant ({u[0]:g}), so the input terms are "
-                    "collinear with the constant and the regression is singular. Use a "
-                    "record where the input varies (e.g. the unbalance force m e w^2 cos wt)."
-                )
-            if not np.any(yk[lag:]):
-                raise ValueError(f"{where}: the output y is identically zero.")
-            Z, nrm = compress(termset_blocks(termset, u, yk, lag), width, self.solver)
+        Zs, norms, records, scale = [], [], [], 0.0
+        for _, members in groups:
+            checked = []
+            for k, d in members:
+                where = (f"Record {k}" if no_speeds
+                         else f"Dataset {k} (speed {d.speed:g} rad/s)")
+                u, yk = check_series(d.u, d.y, None if no_speeds else d.speed, lag + 2, where)
+                if self.nu > 0 and self.degree > 0 and np.ptp(u) == 0:
+                    raise ValueError(
+                        f"{where}: the input u is constant ({u[0]:g}), so the input terms "
+                        "are collinear with the constant and the regression is singular. "
+                        "Use a record where the input varies (e.g. the unbalance force "
+                        "m e w^2 cos wt).")
+                if not np.any(yk[lag:]):
+                    raise ValueError(f"{where}: the output y is identically zero.")
+                checked.append((u, yk))
+                scale = max(scale, float(np.max(np.abs(yk))))
+            Z, nrm = compress(chain.from_iterable(termset_blocks(termset, u, yk, lag)
+                                                  for u, yk in checked), width, self.solver)
             Zs.append(Z)
             norms.append(nrm)
-            series.append((u, yk))
-            scale = max(scale, float(np.max(np.abs(yk))))
+            records.append(checked)
         self.output_scale_ = scale
+        Z = np.stack(Zs)
         norms = np.stack(norms)
-        res, coef, cond = fit_efor(np.stack(Zs), norms, self.esr, self.max_terms, self.tol,
-                                   prune=self.prune)
-        n_rows = [len(yk) - lag for _, yk in series]
+        if self.selection == "simulation":
+            chosen = self._select_by_simulation(records, Z, norms, termset)
+            res, coef, cond = fit_efor(Z, norms, None, None, self.tol, order=chosen)
+        else:
+            res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol,
+                                       prune=self.prune)
+        n_rows = [sum(len(yk) - lag for _, yk in g) for g in records]
         cov, sigma2, dof = coef_covariance(res, norms, n_rows)
         fitted = _Fit(names=[names_all[j] for j in res.selected], coef=coef, cov=cov,
                       sigma2=sigma2, dof=dof, err=res.err, aerr=res.aerr, esr=res.esr,
                       cond=cond, speeds=ws)
+        if self.refine == "output_error":
+            self._refine_output_error(fitted, records, termset.exponents[res.selected])
         if self.noise_lags > 0:
             chosen = TermSet(termset.exponents[res.selected], self.ny, self.nu)
-            P_list = [chosen.evaluate(u, yk, lag, len(yk)) for u, yk in series]
-            y_list = [yk[lag:] for _, yk in series]
+            P_list = [np.vstack([chosen.evaluate(u, yk, lag, len(yk)) for u, yk in g])
+                      for g in records]
+            y_list = [np.concatenate([yk[lag:] for _, yk in g]) for g in records]
             els = extended_least_squares(P_list, y_list, coef, self.noise_lags)
             fitted = _with_noise_model(fitted, els, y_list)
         return fitted
+
+    def _select_by_simulation(self, records, Z, norms, termset):
+        """Dictionary columns chosen by pooled free-run error (see
+        :mod:`sknarx.narx._simulation_selection`)."""
+        M = termset.exponents.shape[0]
+        budget = self.max_terms if self.max_terms is not None else min(M, 30)
+        Gn = np.einsum("kij,kil->kjl", Z, Z)
+        with phase("simulation-error selection") as bar:
+            result = select_by_simulation(
+                records, Gn, norms, termset.exponents, self.ny, self.nu, budget,
+                tol=self.simulation_tol, bound=self._bound(), n_jobs=self.n_jobs,
+                progress=lambda n: bar.set_postfix_str(f"{n} terms"))
+        if not result.selected:
+            raise ValueError(
+                "selection='simulation' found no term whose model free-runs better than "
+                "zero output on the training records; check that the input drives the "
+                "output, or use selection='one_step'.")
+        return result.selected
+
+    def _refine_output_error(self, fitted: _Fit, records, exponents):
+        """Per speed, the coefficients that minimise the free-run error of its records
+        (exact sensitivities), with their output-error covariance."""
+        with phase("output-error refinement") as bar:
+            for k, group in enumerate(records):
+                try:
+                    oe = refine_output_error(group, fitted.coef[k], exponents, self.ny,
+                                             self.nu, bound=self._bound())
+                except FloatingPointError:
+                    where = ("" if fitted.speeds is None
+                             else f" at {fitted.speeds[k]:g} rad/s")
+                    raise FreeRunDivergenceError(
+                        f"refine='output_error': the selected model's free run diverges on "
+                        f"its own training records{where}, so there is no simulation error "
+                        "to refine from; use selection='simulation' (it never keeps such a "
+                        "structure), fewer terms or a lower term degree.") from None
+                fitted.coef[k] = oe.theta
+                fitted.cov[k] = oe.cov
+                fitted.sigma2[k] = oe.sigma2
+                fitted.dof[k] = oe.dof
+                fitted.n_iter = max(fitted.n_iter, oe.n_iter)
+                bar.set_postfix_str(f"{k + 1}/{len(records)} speed(s)")
 
     def _fit_terms(self, X, y) -> _Fit:
         tm = read_term_matrix(self, X, y, "SpeedScheduledNarx")
@@ -561,16 +687,17 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         s = (2.0 * w - a - b) / (b - a) if b > a else np.zeros_like(w)
         return np.moveaxis(np.polynomial.polynomial.polyval(s, self.coef_poly_.T), 0, -1)
 
-    def simulate(self, u, omega, y0=None, on_divergence="raise"):
+    def simulate(self, u, omega=None, y0=None, on_divergence="raise"):
         """Free-run the model from the input alone (model predicted output).
 
         Parameters
         ----------
         u : array-like of shape (n_samples,)
             Input (e.g. the unbalance force, N).
-        omega : float or array-like of shape (n_samples,)
+        omega : float or array-like of shape (n_samples,), optional
             Speed in rad/s: constant, or one value per sample for a run-up or
-            coast-down.
+            coast-down. Needed by a speed-scheduled model; a model fitted without
+            speeds takes none.
         y0 : array-like of shape (max_lag,), optional
             Initial outputs ``y(0..max_lag-1)``; zeros (rest) by default.
         on_divergence : {'raise', 'warn'}, default='raise'
@@ -587,13 +714,18 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         yhat, at = free_run(u, theta, self.exponents_, self.ny_, self.nu_, y0=y0,
                             bound=self._bound())
         if at >= 0:
-            wt = float(w) if w.ndim == 0 else float(w[at])
-            msg = (
-                f"The free run diverged at sample {at} (speed {wt:g} rad/s): |y| exceeded "
-                f"{self._bound():.3g}, 1000 times the largest training output. The identified "
-                "model is unstable there; add training speeds near it, lower coef_degree or the "
-                "term degree, or raise esr."
-            )
+            fix = ("choose the terms by free-run error (selection='simulation'), refine "
+                   "them on it (refine='output_error'), or use fewer terms (max_terms) or "
+                   "a lower term degree")
+            if self.speed_range_ is None:
+                where, fix = "", "The identified model is unstable on this input; " + fix
+            else:
+                wt = float(w) if w.ndim == 0 else float(w[at])
+                where = f" (speed {wt:g} rad/s)"
+                fix = ("The identified model is unstable there; add training speeds near "
+                       "it, lower coef_degree, or " + fix)
+            msg = (f"The free run diverged at sample {at}{where}: |y| exceeded "
+                   f"{self._bound():.3g}, 1000 times the largest training output. {fix}.")
             if on_divergence == "raise":
                 raise FreeRunDivergenceError(msg)
             warnings.warn(msg, RuntimeWarning, stacklevel=2)
@@ -615,6 +747,12 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             raise ValueError(f"u must be 1-D, got shape {u.shape}.")
         if not np.all(np.isfinite(u)):
             raise ValueError("u contains NaN/inf.")
+        if omega is None:
+            if self.speed_range_ is not None:
+                raise ValueError(
+                    "This model is speed-scheduled: give the speed omega (rad/s), one value "
+                    "or one per sample.")
+            omega = 0.0
         w = np.asarray(omega, dtype=float)
         if w.ndim != 0 and w.shape != u.shape:
             raise ValueError(
