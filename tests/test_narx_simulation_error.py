@@ -27,8 +27,9 @@ def _duffing(n, seed, noise=0.0, a=(1.2, -0.5), cubic=-0.1):
     rng = np.random.default_rng(seed)
     u = 0.5 * rng.standard_normal(n)
     y = np.zeros(n)
-    for t in range(2, n):
-        y[t] = a[0] * y[t - 1] + a[1] * y[t - 2] + cubic * y[t - 1] ** 3 + u[t - 1]
+    with np.errstate(over="ignore", invalid="ignore"):  # a drawn system may blow up
+        for t in range(2, n):
+            y[t] = a[0] * y[t - 1] + a[1] * y[t - 2] + cubic * y[t - 1] ** 3 + u[t - 1]
     return u, y + noise * rng.standard_normal(n)
 
 
@@ -168,3 +169,38 @@ def test_silverbox_example_meets_the_benchmark_targets(tmp_path, monkeypatch, ca
     model = SpeedScheduledNarx.from_json(tmp_path / "model.json")
     assert model.selected_terms_ == metrics["terms"]
     assert "within range" in capsys.readouterr().out
+
+
+def _scheduled_sweep(speeds, noise, n=1500):
+    """A Duffing-type oscillator whose stiffness term moves with speed (rad/s)."""
+    data = []
+    for k, w in enumerate(speeds):
+        u, y = _duffing(n, 10 + k, noise=noise, a=(1.0 + 0.002 * w, -0.5))
+        data.append((u, y))
+    return data
+
+
+def test_speed_functions_refined_on_the_free_run_of_every_speed():
+    speeds = np.array([50.0, 80.0, 110.0, 140.0, 170.0])
+    data = _scheduled_sweep(speeds, noise=0.2)
+    kw = dict(ny=2, nu=1, degree=3, max_terms=4, esr=0, coef_degree=1)
+    ls = SpeedScheduledNarx(**kw).fit(data, speeds)
+    oe = SpeedScheduledNarx(**kw, refine="output_error").fit(data, speeds)
+    assert oe.selected_terms_ == ls.selected_terms_
+    i = oe.selected_terms_.index("y(t-1)")
+    truth = 1.0 + 0.002 * speeds
+    err_ls = np.abs(ls.coefficients_at(speeds)[:, i] - truth).max()
+    err_oe = np.abs(oe.coefficients_at(speeds)[:, i] - truth).max()
+    assert err_oe < 0.3 * err_ls
+    theta, std = oe.coefficients_at(125.0, return_std=True)
+    assert np.all(std > 0) and abs(theta[i] - 1.25) < 4 * std[i]
+    assert oe.coef_poly_cov_.shape == (oe.coef_poly_.size,) * 2
+    # the slope (beta1, per rad/s) and its standard error, in powers of omega
+    slope = oe.speed_polynomials_.loc["y(t-1)", "beta1"]
+    se = oe.speed_polynomials_std_err_.loc["y(t-1)", "beta1"]
+    assert abs(slope - 0.002) < 4 * se
+    back = SpeedScheduledNarx.from_json(oe.to_json())
+    np.testing.assert_array_equal(back.coef_poly_cov_, oe.coef_poly_cov_)
+    band = oe.simulate_interval(data[2][0], 110.0, y0=data[2][1][:2], n_draws=20,
+                                random_state=0)
+    assert np.all(band.lower[10:] <= band.upper[10:])

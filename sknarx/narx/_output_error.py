@@ -24,7 +24,7 @@ from numba import njit
 from .freerun import free_run, term_factors
 
 __all__ = ["OutputErrorFit", "free_run_sensitivities", "refine_output_error",
-           "simulation_error"]
+           "refine_speed_functions", "simulation_error"]
 
 
 @njit(cache=True, nogil=True)
@@ -138,19 +138,77 @@ class OutputErrorFit:
     converged: bool
 
 
-def _stack(records, theta, exponents, ny, nu, bound, skip):
+def _normal_equations(records, theta, exponents, ny, nu, bound, skip, basis=None):
+    """Sum of squared free-run errors and the Gauss-Newton normal equations
+    ``(J^T J, J^T e)`` accumulated record by record (``J`` never held whole); ``None``
+    when a run diverges. With ``basis`` (per record, a vector ``v``) the parameters are
+    ``beta`` of ``theta = beta @ v`` (shape ``(m, len(v))``) and the record's
+    Jacobian is ``S kron v``."""
     start = max(ny, nu) + skip
-    es, Ss = [], []
-    for u, y in records:
-        yh, S, at = free_run_sensitivities(u, y, theta, exponents, ny, nu, bound)
+    sse, A, g = 0.0, None, None
+    for r, (u, y) in enumerate(records):
+        th = theta if basis is None else theta @ basis[r]
+        yh, S, at = free_run_sensitivities(u, y, th, exponents, ny, nu, bound)
         if at >= 0:
-            return None, None
-        es.append(y[start:] - yh[start:])
-        Ss.append(S[start:])
-    e = np.concatenate(es)
-    if not np.all(np.isfinite(e)):
-        return None, None
-    return e, np.vstack(Ss)
+            return None
+        e = y[start:] - yh[start:]
+        S = S[start:]
+        StS, Ste = S.T @ S, S.T @ e
+        if basis is not None:
+            v = basis[r]
+            StS, Ste = np.kron(StS, np.outer(v, v)), np.kron(Ste, v)
+        sse += float(e @ e)
+        A = StS if A is None else A + StS
+        g = Ste if g is None else g + Ste
+    if not np.isfinite(sse):
+        return None
+    return sse, A, g
+
+
+def _levenberg_marquardt(evaluate, x0, max_iter, rtol):
+    """Minimise ``sse(x)`` given ``evaluate(x) -> (sse, J^T J, J^T e)`` or ``None``
+    (a divergence, treated as an infinite error). Returns ``(x, sse, A, sse0, n_iter,
+    converged)``."""
+    x = np.asarray(x0, dtype=float).copy()
+    first = evaluate(x)
+    if first is None:
+        raise FloatingPointError("the starting model's free run diverges")
+    sse, A, g = first
+    sse0 = sse
+    lam = 1e-3
+    converged = False
+    it = 0
+    flat = x.reshape(-1)
+    for it in range(1, max_iter + 1):  # noqa: B007 -- reported
+        d = np.sqrt(np.clip(np.diag(A), 1e-300, None))
+        accepted = None
+        while lam < 1e12:
+            M = A / np.outer(d, d) + lam * np.eye(flat.size)
+            step = np.linalg.solve(M, g / d) / d
+            cand = (flat + step).reshape(x.shape)
+            trial = evaluate(cand)
+            if trial is not None and trial[0] < sse:
+                accepted = trial
+                break
+            lam *= 10.0
+        if accepted is None:
+            converged = True  # no descent direction left at this precision
+            break
+        gain = (sse - accepted[0]) / sse
+        x, (sse, A, g) = cand, accepted
+        flat = x.reshape(-1)
+        lam = max(lam / 10.0, 1e-12)
+        if gain < rtol:
+            converged = True
+            break
+    return x, sse, A, sse0, it, converged
+
+
+def _covariance(A, sigma2):
+    try:
+        return sigma2 * np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return sigma2 * np.linalg.pinv(A)
 
 
 def refine_output_error(records, theta0, exponents, ny, nu, bound=np.inf, skip=0,
@@ -162,45 +220,63 @@ def refine_output_error(records, theta0, exponents, ny, nu, bound=np.inf, skip=0
     so the result is never worse than ``theta0``. Convergence: the relative decrease
     of the error below ``rtol`` at an accepted step.
     """
-    theta = np.asarray(theta0, dtype=float).copy()
-    e, J = _stack(records, theta, exponents, ny, nu, bound, skip)
-    if e is None:
-        raise FloatingPointError("the starting model's free run diverges")
-    sse0 = sse = float(e @ e)
-    lam = 1e-3
-    converged = False
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 -- reported
-        A = J.T @ J
-        b = J.T @ e
-        d = np.sqrt(np.clip(np.diag(A), 1e-300, None))
-        accepted = False
-        while lam < 1e12:
-            M = A / np.outer(d, d) + lam * np.eye(len(theta))
-            step = np.linalg.solve(M, b / d) / d
-            cand = theta + step
-            e_new, J_new = _stack(records, cand, exponents, ny, nu, bound, skip)
-            sse_new = float(e_new @ e_new) if e_new is not None else np.inf
-            if sse_new < sse:
-                accepted = True
-                break
-            lam *= 10.0
-        if not accepted:
-            converged = True  # no descent direction left at this precision
-            break
-        gain = (sse - sse_new) / sse
-        theta, e, J, sse = cand, e_new, J_new, sse_new
-        lam = max(lam / 10.0, 1e-12)
-        if gain < rtol:
-            converged = True
-            break
-    m = len(theta)
-    dof = max(len(e) - m, 1)
+    theta, sse, A, sse0, it, ok = _levenberg_marquardt(
+        lambda th: _normal_equations(records, th, exponents, ny, nu, bound, skip),
+        theta0, max_iter, rtol)
+    start = max(ny, nu) + skip
+    n = sum(len(y) - start for _, y in records)
+    dof = max(n - theta.size, 1)
     sigma2 = sse / dof
-    A = J.T @ J
-    try:
-        cov = sigma2 * np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        cov = sigma2 * np.linalg.pinv(A)
-    return OutputErrorFit(theta=theta, cov=cov, sigma2=sigma2, dof=dof, sse=sse,
-                          sse_start=sse0, n_iter=it, converged=converged)
+    return OutputErrorFit(theta=theta, cov=_covariance(A, sigma2), sigma2=sigma2, dof=dof,
+                          sse=sse, sse_start=sse0, n_iter=it, converged=ok)
+
+
+def refine_speed_functions(groups, basis, beta0, exponents, ny, nu, sigma2, bound=np.inf,
+                           max_iter=50, rtol=1e-7):
+    """Minimise the free-run error of every speed's records over the coefficients of
+    the speed functions, ``theta(omega_k) = beta @ basis[k]``.
+
+    Parameters
+    ----------
+    groups : list of list of (u, y)
+        Each speed's records.
+    basis : ndarray (K, J + 1)
+        The speed basis at each speed (powers of the scaled speed).
+    beta0 : ndarray (m, J + 1)
+    sigma2 : ndarray (K,)
+        Each speed's simulation-error variance: its records are weighted by
+        ``1 / sigma2_k``, so the result is the maximum-likelihood fit under independent
+        Gaussian output errors and its covariance is ``(J^T W J)^-1``.
+
+    Returns
+    -------
+    OutputErrorFit
+        ``theta`` holds ``beta`` (m, J + 1); ``cov`` is over ``beta.ravel()``.
+    """
+    records, vs, weights = [], [], []
+    for k, group in enumerate(groups):
+        for u, y in group:
+            records.append((u, y))
+            vs.append(basis[k])
+            weights.append(1.0 / sigma2[k])
+
+    def evaluate(beta):
+        total, A, g = 0.0, 0.0, 0.0
+        for r, (u, y) in enumerate(records):
+            out = _normal_equations([(u, y)], beta, exponents, ny, nu, bound, 0,
+                                    basis=[vs[r]])
+            if out is None:
+                return None
+            sse, Ar, gr = out
+            total += weights[r] * sse
+            A = A + weights[r] * Ar
+            g = g + weights[r] * gr
+        return total, A, g
+
+    beta, sse, A, sse0, it, ok = _levenberg_marquardt(evaluate, beta0, max_iter, rtol)
+    start = max(ny, nu)
+    n = sum(len(y) - start for _, y in records)
+    dof = max(n - beta.size, 1)
+    # weighted errors have unit variance when the per-speed variances are right
+    return OutputErrorFit(theta=beta, cov=_covariance(A, 1.0), sigma2=sse / dof, dof=dof,
+                          sse=sse, sse_start=sse0, n_iter=it, converged=ok)

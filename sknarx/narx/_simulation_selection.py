@@ -6,9 +6,10 @@ free run wrong or unstable. Piroddi & Spinelli (An identification algorithm for
 polynomial NARX models based on simulation error minimization, Int. J. Control 76(17),
 2003) judge a term by the free run instead:
 
-0. the search starts from the linear model over every lag (an oscillator needs its
-   output lags together: added one at a time, none of them helps the free run), or
-   from nothing when that linear model's free run diverges;
+0. the search starts from the best-simulating of the given seeds (by default the linear
+   model over every lag; the estimator adds the one-step selection's structure): an
+   oscillator needs its output lags together, and added one at a time none of them
+   helps the free run. With no seed that free-runs, it starts from nothing;
 1. each step adds the candidate term whose model (coefficients by least squares on the
    one-step regression, as there) has the smallest simulation error;
 2. after each addition, terms whose removal raises the simulation error by less than
@@ -105,7 +106,7 @@ class _Judge:
 
 
 def select_by_simulation(groups, Gn, norms, exponents, ny, nu, max_terms, tol=0.01,
-                         bound=np.inf, n_jobs=None, progress=None):
+                         bound=np.inf, n_jobs=None, progress=None, seeds=()):
     """Choose a common term set by simulation error (see the module docstring).
 
     Parameters
@@ -126,15 +127,21 @@ def select_by_simulation(groups, Gn, norms, exponents, ny, nu, max_terms, tol=0.
         compiled and releases the GIL).
     progress : callable or None
         Called with the number of terms after each accepted step.
+    seeds : sequence of lists of columns
+        Further starting sets besides the linear model; the best-simulating one
+        starts the search.
     """
     judge = _Judge(groups, Gn, norms, np.asarray(exponents), ny, nu, bound)
     M = Gn.shape[1] - 1
     ex = np.asarray(exponents)
     linear = [j for j in range(M) if ex[j].sum() == 1 and norms[:, j].min() > 0]
-    seed = linear[:max_terms]
-    current = judge.error(seed) if seed else 1.0
-    chosen: list = list(seed) if current < 1.0 else []
-    current = min(current, 1.0)
+    chosen: list = []
+    current = 1.0
+    for seed in [linear, *seeds]:
+        seed = list(seed)[:max_terms]
+        err = judge.error(seed) if seed else np.inf
+        if err < current:
+            chosen, current = seed, float(err)
     history = [("start", j, current) for j in chosen]
     parallel = Parallel(n_jobs=n_jobs, prefer="threads")
     for _ in range(4 * max_terms):  # each addition lowers the error by tol: a safe cap

@@ -45,6 +45,8 @@ def model_state(model) -> dict:
         "err_per_speed": _floats(model.err_.to_numpy()),
         "speed_range_rad_s": None if model.speed_range_ is None else list(model.speed_range_),
         "speed_polynomial_scaled": _floats(model.coef_poly_),
+        "speed_polynomial_scaled_cov": (None if getattr(model, "coef_poly_cov_", None) is None
+                                        else _floats(model.coef_poly_cov_)),
         "speed_polynomial_raw": _floats(model.speed_polynomials_.to_numpy()),
         "speed_polynomial_raw_std_err": _floats(model.speed_polynomials_std_err_.to_numpy()),
         "output_scale": float(model.output_scale_),
@@ -92,6 +94,8 @@ def restore_state(model, doc: dict) -> None:
     rng = doc["speed_range_rad_s"]
     model.speed_range_ = None if rng is None else tuple(rng)
     model.coef_poly_ = np.asarray(doc["speed_polynomial_scaled"], dtype=float)
+    poly_cov = doc.get("speed_polynomial_scaled_cov")  # refined speed functions only
+    model.coef_poly_cov_ = None if poly_cov is None else np.asarray(poly_cov, dtype=float)
     raw = np.asarray(doc["speed_polynomial_raw"], dtype=float)
     cols = [f"beta{j}" for j in range(raw.shape[1])]
     model.speed_polynomials_ = pd.DataFrame(raw, index=names, columns=cols)
