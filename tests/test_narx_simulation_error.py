@@ -204,3 +204,26 @@ def test_speed_functions_refined_on_the_free_run_of_every_speed():
     band = oe.simulate_interval(data[2][0], 110.0, y0=data[2][1][:2], n_draws=20,
                                 random_state=0)
     assert np.all(band.lower[10:] <= band.upper[10:])
+
+
+def test_the_selector_chooses_by_simulation_in_a_pipeline_as_the_regressor_does():
+    from sklearn.pipeline import make_pipeline
+
+    from sknarx import CommonStructureEFOR, NarxTermDictionary
+
+    speeds = np.array([60.0, 120.0, 180.0])
+    data = _scheduled_sweep(speeds, noise=0.05, n=800)
+    direct = SpeedScheduledNarx(ny=2, nu=2, degree=3, coef_degree=1, max_terms=12,
+                                selection="simulation").fit(data, speeds)
+    import pandas as pd
+
+    table = pd.concat([pd.DataFrame({"speed": w, "u": u, "y": y})
+                       for (u, y), w in zip(data, speeds, strict=True)], ignore_index=True)
+    pipe = make_pipeline(NarxTermDictionary(ny=2, nu=2, degree=3),
+                         CommonStructureEFOR(max_terms=12, selection="simulation"),
+                         SpeedScheduledNarx(coef_degree=1))
+    pipe.fit(table, table["y"])
+    assert pipe[1].selected_terms_ == direct.selected_terms_
+    with pytest.raises(ValueError, match="u\\(t-1\\)"):
+        CommonStructureEFOR(selection="simulation").fit(
+            pd.DataFrame({"y(t-1)": table["y"].shift(1)}).iloc[1:], table["y"].iloc[1:])

@@ -13,6 +13,8 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._design import as_configured_output, check_nan_rows, read_term_matrix
 from ._orthogonal import compress, condition_numbers, efor, matrix_blocks, unscale
+from ._simulation_selection import select_by_simulation
+from .terms import parse_terms, split_noise_terms
 
 __all__ = ["CommonStructureEFOR", "IllConditionedWarning", "fit_efor"]
 
@@ -130,6 +132,17 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         pick a proxy term early (e.g. ``u(t-2)`` for ``y(t-1)``) that later terms make
         redundant; pruning removes it. ``prune=False`` is the paper's method
         exactly (and classical FROLS for one dataset).
+    selection : {'one_step', 'simulation'}, default='one_step'
+        ``'simulation'`` chooses the terms by their free-run error pooled over every
+        dataset, as :class:`SpeedScheduledNarx` does with the same option (Piroddi &
+        Spinelli 2003); the columns must be NARX terms with an ``u(t-1)`` column
+        (as :class:`NarxTermDictionary` makes them), from which the input is read;
+        noise columns ``e(t-k)`` are not candidates then. ``aerr_`` and ``err_`` are
+        reported for the chosen terms in their order.
+    simulation_tol : float, default=0.002
+        See :class:`SpeedScheduledNarx`.
+    n_jobs : int or None, default=None
+        Parallel candidate evaluations of ``selection='simulation'`` (joblib threads).
 
     Attributes
     ----------
@@ -171,14 +184,21 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
         "prune": ["boolean"],
+        "selection": [StrOptions({"one_step", "simulation"})],
+        "simulation_tol": [Interval(Real, 0, 1, closed="left")],
+        "n_jobs": [Integral, None],
     }
 
-    def __init__(self, esr=0.01, max_terms=None, solver="gram", tol=1e-12, prune=True):
+    def __init__(self, esr=0.01, max_terms=None, solver="gram", tol=1e-12, prune=True,
+                 selection="one_step", simulation_tol=0.002, n_jobs=None):
         self.esr = esr
         self.max_terms = max_terms
         self.solver = solver
         self.tol = tol
         self.prune = prune
+        self.selection = selection
+        self.simulation_tol = simulation_tol
+        self.n_jobs = n_jobs
 
     def fit(self, X, y):
         """Select the common terms.
@@ -199,6 +219,10 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         tm = read_term_matrix(self, X, y, "CommonStructureEFOR")
         Z, norms = compress_groups(tm, self.solver)
         res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol, prune=self.prune)
+        if self.selection == "simulation":
+            chosen = _simulation_structure(tm, Z, norms, res.selected, self.max_terms,
+                                           self.simulation_tol, self.n_jobs)
+            res, coef, cond = fit_efor(Z, norms, None, None, self.tol, order=chosen)
         speeds = tm.dataset_speeds()
         warn_conditioning(cond, speeds, self.solver)
         names = [tm.names[j] for j in res.selected]
@@ -245,6 +269,43 @@ class CommonStructureEFOR(TransformerMixin, BaseEstimator):
         """Names of the selected terms in selection order."""
         check_is_fitted(self, "selected_indices_")
         return np.asarray(self.selected_terms_, dtype=object)
+
+
+def _simulation_structure(tm, Z, norms, one_step, max_terms, tol, n_jobs):
+    """Columns of the term matrix ``tm`` chosen by pooled free-run error; the input is
+    read back from its ``u(t-1)`` column."""
+    process = split_noise_terms(tm.names)[0]
+    try:
+        exponents, ny, nu = parse_terms([tm.names[j] for j in process])
+    except ValueError as exc:
+        raise ValueError(
+            "selection='simulation' free-runs the candidates, so the columns must be NARX "
+            f"terms as NarxTermDictionary names them ({exc})") from None
+    if "u(t-1)" not in tm.names:
+        raise ValueError(
+            "selection='simulation' reads the input from the 'u(t-1)' column, which X "
+            "lacks; build the candidates with NarxTermDictionary(nu >= 1, degree >= 1).")
+    col = tm.P[:, tm.names.index("u(t-1)")]
+    records, scale = [], 0.0
+    for a, b in tm.groups:
+        u = np.zeros(b - a)
+        u[:-1] = np.nan_to_num(col[a + 1:b])  # u(t-1) at row t + 1 is u(t)
+        records.append([(u, tm.y[a:b])])
+        scale = max(scale, float(np.nanmax(np.abs(tm.y[a:b]))))
+    cols = list(process) + [Z.shape[1] - 1]  # the candidates and the output
+    Zs = Z[:, :, cols]
+    Gn = np.einsum("kij,kil->kjl", Zs, Zs)
+    where = {j: i for i, j in enumerate(process)}
+    seed = [where[j] for j in one_step if j in where]
+    budget = max_terms if max_terms is not None else min(len(process), 30)
+    result = select_by_simulation(records, Gn, norms[:, cols], exponents, ny, nu, budget,
+                                  tol=tol, bound=1e3 * scale if scale > 0 else np.inf,
+                                  n_jobs=n_jobs, seeds=[seed])
+    if not result.selected:
+        raise ValueError(
+            "selection='simulation' found no term whose model free-runs better than zero "
+            "output; check that the input drives the output, or use selection='one_step'.")
+    return [process[i] for i in result.selected]
 
 
 def compress_groups(tm, solver):
