@@ -12,7 +12,7 @@ from sknarx.testing import make_trial
 # A 'rig' with slow-roll runout, a few percent of stiffness/damping/unbalance mismatch,
 # noise and keyphasor jitter: the diagnoser only sees the table.
 speeds = tuple(np.linspace(81.7, 276.5, 6).round(4))
-measured, truth = make_trial("runout", seed=3, speeds=speeds, n_samples=1000)
+measured, truth = make_trial("runout", seed=7, speeds=speeds, n_samples=1000)
 print(measured.head())
 
 result = diagnose(measured, candidates=("runout", "crack", "anisotropy"))

@@ -12,7 +12,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 # run where their outputs are pinned, so that a two-minute example does not run twice
 RUN_ELSEWHERE = {Path("examples/rk4/identify_unbalance.py"): "tests/test_unbalance.py",
-                 Path("examples/rk4/diagnose_rk4.py"): "tests/test_rk4_real.py"}
+                 Path("examples/rk4/diagnose_rk4.py"): "tests/test_rk4_real.py",
+                 Path("examples/04_gap_diagnosis.py"): "tests/test_gap_diagnose.py",
+                 Path("examples/silverbox.py"): "tests/test_narx_simulation_error.py"}
 EXAMPLES = sorted(p.relative_to(ROOT) for p in (ROOT / "examples").rglob("*.py")
                   if p.relative_to(ROOT) not in RUN_ELSEWHERE)
 
