@@ -2,6 +2,7 @@
 
 from .dictionary import NarxTermDictionary
 from .freerun import FreeRunDivergenceError
+from .multioutput import MultiOutputScheduledNarx
 from .scheduling import SimulationInterval, SpeedExtrapolationWarning, SpeedScheduledNarx
 from .scoring import FreeRunDivergenceWarning, free_run_nrmse, free_run_scorer, nrmse
 from .selection import CommonStructureEFOR, IllConditionedWarning
@@ -13,6 +14,7 @@ __all__ = [
     "NarxTermDictionary",
     "CommonStructureEFOR",
     "SpeedScheduledNarx",
+    "MultiOutputScheduledNarx",
     "SimulationInterval",
     "LeaveOneSpeedOut",
     "FreeRunDivergenceError",

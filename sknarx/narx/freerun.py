@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["FreeRunDivergenceError", "term_factors", "free_run"]
+__all__ = ["FreeRunDivergenceError", "term_factors", "free_run", "free_run_mimo"]
 
 
 class FreeRunDivergenceError(RuntimeError):
@@ -92,3 +92,79 @@ def free_run(u, theta, exponents, ny, nu, y0=None, bound=np.inf):
     if at >= 0:
         y[at:] = np.nan
     return y, int(at)
+
+
+@njit(cache=True, nogil=True)
+def _free_run_mimo(U, Y, theta, factors, owner, ny, nu, start, bound):  # pragma: no cover
+    n, p = Y.shape
+    q = U.shape[1]
+    s = factors.shape[0]
+    depth = factors.shape[1]
+    lagv = np.empty(p * ny + q * nu)
+    acc = np.empty(p)
+    constant = theta.shape[0] == 1
+    for t in range(start, n):
+        for c in range(p):
+            for i in range(ny):
+                lagv[c * ny + i] = Y[t - 1 - i, c]
+        for c in range(q):
+            for i in range(nu):
+                lagv[p * ny + c * nu + i] = U[t - 1 - i, c]
+        row = 0 if constant else t
+        for c in range(p):
+            acc[c] = 0.0
+        for m in range(s):
+            v = theta[row, m]
+            for d in range(depth):
+                j = factors[m, d]
+                if j < 0:
+                    break
+                v *= lagv[j]
+            acc[owner[m]] += v
+        for c in range(p):
+            Y[t, c] = acc[c]
+            if not (abs(acc[c]) <= bound[c]):
+                return t
+    return -1
+
+
+def free_run_mimo(U, thetas, exponents, owner, ny, nu, n_outputs, Y0=None, bound=None):
+    """Joint free run of a multi-output model: every output from the inputs and the
+    outputs' own simulated lags.
+
+    Parameters
+    ----------
+    U : ndarray (N, n_inputs)
+    thetas : ndarray (N, s) or (1, s)
+        Coefficients of all outputs' terms, side by side.
+    exponents : ndarray (s, n_outputs * ny + n_inputs * nu)
+    owner : ndarray (s,)
+        The output each term belongs to.
+    Y0 : ndarray (max_lag, n_outputs) or None
+        Initial outputs; zeros by default.
+    bound : ndarray (n_outputs,) or None
+        Divergence is declared when an output's ``|y|`` exceeds its bound.
+
+    Returns
+    -------
+    Y : ndarray (N, n_outputs)
+        NaN from the divergence point on, if any.
+    diverged_at : int
+    """
+    U = np.ascontiguousarray(np.asarray(U, dtype=float).reshape(len(U), -1))
+    start = max(ny, nu)
+    Y = np.zeros((U.shape[0], n_outputs))
+    if Y0 is not None:
+        Y0 = np.asarray(Y0, dtype=float).reshape(-1, n_outputs)
+        if Y0.shape[0] < start:
+            raise ValueError(f"Y0 needs the first {start} outputs (max lag) of each output; "
+                             f"got {Y0.shape[0]}.")
+        Y[:start] = Y0[:start]
+    theta = np.ascontiguousarray(np.atleast_2d(thetas), dtype=float)
+    bound = (np.full(n_outputs, np.inf) if bound is None
+             else np.broadcast_to(np.asarray(bound, dtype=float), (n_outputs,)).copy())
+    at = _free_run_mimo(U, Y, theta, term_factors(exponents),
+                        np.asarray(owner, dtype=np.int64), ny, nu, start, bound)
+    if at >= 0:
+        Y[at:] = np.nan
+    return Y, int(at)

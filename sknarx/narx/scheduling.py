@@ -32,6 +32,7 @@ from .selection import compress_groups, fit_efor, warn_conditioning
 from .sweep_data import as_datasets, check_series, read_sample_table
 from .terms import (
     TermSet,
+    channel_counts,
     monomial_exponents,
     noise_term_name,
     parse_terms,
@@ -53,6 +54,8 @@ def _spline(speeds, coef):
 def _process_structure(names):
     """Exponents and lags of the process terms, or Nones when they are not NARX terms."""
     process = split_noise_terms(names)[0]
+    if channel_counts(names) != (1, 1):  # one output of a multi-output model
+        return None, None, None
     try:
         return parse_terms([names[i] for i in process])
     except ValueError:
@@ -412,6 +415,11 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             if hasattr(self, attr):
                 delattr(self, attr)
         fitted = self._fit_sweep(X, y) if _is_sweep(X) else self._fit_terms(X, y)
+        return self._set_fitted(fitted)
+
+    def _set_fitted(self, fitted: _Fit):
+        """The fitted attributes from one fitting path's result (shared with the
+        multi-output model, which fits one of these per output)."""
         warn_conditioning(fitted.cond, fitted.speeds, self.solver)
         names, speeds = fitted.names, fitted.speeds
         index = pd.Index(speeds, name="speed") if speeds is not None else None
