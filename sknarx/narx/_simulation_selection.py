@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 from joblib import Parallel, delayed
 
-from .freerun import free_run
+from .freerun import free_run, free_run_mimo
 
-__all__ = ["SimulationSelection", "select_by_simulation"]
+__all__ = ["SimulationSelection", "select_by_simulation", "select_joint_by_simulation"]
 
 #: a pooled relative simulation error at round-off: the records are reproduced exactly
 _EXACT = 1e3 * np.finfo(float).eps
@@ -134,20 +134,42 @@ def select_by_simulation(groups, Gn, norms, exponents, ny, nu, max_terms, tol=0.
     judge = _Judge(groups, Gn, norms, np.asarray(exponents), ny, nu, bound)
     M = Gn.shape[1] - 1
     ex = np.asarray(exponents)
-    linear = [j for j in range(M) if ex[j].sum() == 1 and norms[:, j].min() > 0]
+    usable = [j for j in range(M) if norms[:, j].min() > 0]
+    linear = [j for j in usable if ex[j].sum() == 1]
+    chosen, current, history = _search(judge, usable, [linear, *seeds],
+                                       lambda chosen, j: len(chosen) < max_terms,
+                                       max_terms, tol, n_jobs, progress)
+    coef = judge.coef(chosen) if chosen else np.zeros((Gn.shape[0], 0))
+    return SimulationSelection(selected=chosen, coef=coef, error=current, history=history)
+
+
+def _search(judge, items, seeds, can_add, budget, tol, n_jobs, progress):
+    """The greedy search with pruning over ``items`` (see the module docstring)."""
     chosen: list = []
     current = 1.0
-    for seed in [linear, *seeds]:
-        seed = list(seed)[:max_terms]
+    for seed in seeds:
+        seed = [j for j in seed if can_add([], j)][:budget]
         err = judge.error(seed) if seed else np.inf
         if err < current:
             chosen, current = seed, float(err)
     history = [("start", j, current) for j in chosen]
     parallel = Parallel(n_jobs=n_jobs, prefer="threads")
-    for _ in range(4 * max_terms):  # each addition lowers the error by tol: a safe cap
-        if len(chosen) >= max_terms:
-            break
-        pool = [j for j in range(M) if j not in chosen and norms[:, j].min() > 0]
+
+    def prune(candidates):
+        nonlocal current
+        while len(chosen) > 1:
+            trial = parallel(delayed(judge.error)([c for c in chosen if c != j])
+                             for j in candidates())
+            worst = int(np.argmin(trial))
+            if trial[worst] > max(current * (1.0 + tol), _EXACT):
+                break
+            removed = candidates()[worst]
+            chosen.remove(removed)
+            current = float(trial[worst])
+            history.append(("prune", removed, current))
+
+    for _ in range(4 * budget):  # each addition lowers the error by tol: a safe cap
+        pool = [j for j in items if j not in chosen and can_add(chosen, j)]
         if not pool:
             break
         errs = parallel(delayed(judge.error)(chosen + [j]) for j in pool)
@@ -158,24 +180,79 @@ def select_by_simulation(groups, Gn, norms, exponents, ny, nu, max_terms, tol=0.
         chosen.append(pool[best])
         current = float(errs[best])
         history.append(("add", pool[best], current))
-        while len(chosen) > 2:  # prune: a term the free run does not need goes
-            trial = parallel(delayed(judge.error)([c for c in chosen if c != j])
-                             for j in chosen[:-1])
-            worst = int(np.argmin(trial))
-            if trial[worst] > max(current * (1.0 + tol), _EXACT):
-                break
-            removed = chosen.pop(worst)
-            current = float(trial[worst])
-            history.append(("prune", removed, current))
+        if len(chosen) > 2:  # prune: a term the free run does not need goes
+            prune(lambda: chosen[:-1])
         if progress is not None:
             progress(len(chosen))
-    while len(chosen) > 1:  # the seed's terms the free run does not need go too
-        trial = parallel(delayed(judge.error)([c for c in chosen if c != j]) for j in chosen)
-        worst = int(np.argmin(trial))
-        if trial[worst] > max(current * (1.0 + tol), _EXACT):
-            break
-        removed = chosen.pop(worst)
-        current = float(trial[worst])
-        history.append(("prune", removed, current))
-    coef = judge.coef(chosen) if chosen else np.zeros((Gn.shape[0], 0))
-    return SimulationSelection(selected=chosen, coef=coef, error=current, history=history)
+    prune(lambda: list(chosen))  # the seed's terms the free run does not need go too
+    return chosen, current, history
+
+
+class _JointJudge:
+    """Fits each output's columns per speed and scores the joint free run's pooled error
+    (items are ``(output, column)`` pairs)."""
+
+    def __init__(self, groups, Gn, norms, exponents, ny, nu, n_outputs, bound):
+        self.singles = [_Judge([[] for _ in groups], Gn[c], norms[c], exponents, ny, nu, np.inf)
+                        for c in range(n_outputs)]
+        self.groups = groups  # per speed: list of (U, Y) records
+        self.exponents = exponents
+        self.ny, self.nu, self.p = ny, nu, n_outputs
+        self.start = max(ny, nu)
+        self.bound = bound
+        self.energy = [np.sum([np.sum(Y[self.start:] ** 2, axis=0) for _, Y in g], axis=0)
+                       for g in groups]
+
+    def split(self, items):
+        return [[j for c, j in items if c == o] for o in range(self.p)]
+
+    def error(self, items):
+        cols = self.split(items)  # an output without terms simulates as zero
+        if not items:
+            return 1.0
+        coefs = [self.singles[o].coef(c) if c else np.zeros((len(self.groups), 0))
+                 for o, c in enumerate(cols)]
+        if any(c is None for c in coefs):
+            return np.inf
+        ex = self.exponents[[j for c in cols for j in c]]
+        owner = np.array([o for o, c in enumerate(cols) for _ in c], dtype=np.int64)
+        total = 0.0
+        for k, records in enumerate(self.groups):
+            theta = np.concatenate([c[k] for c in coefs])[None]
+            sse = 0.0
+            for U, Y in records:
+                Ys, at = free_run_mimo(U, theta, ex, owner, self.ny, self.nu, self.p,
+                                       Y0=Y[:self.start], bound=self.bound)
+                if at >= 0:
+                    return np.inf
+                sse = sse + np.sum((Y[self.start:] - Ys[self.start:]) ** 2, axis=0)
+            total += float(np.mean(sse / self.energy[k]))
+        value = total / len(self.groups)
+        return value if np.isfinite(value) else np.inf
+
+
+def select_joint_by_simulation(groups, Gn, norms, exponents, ny, nu, n_outputs, max_terms,
+                               tol=0.01, bound=np.inf, n_jobs=None, seeds=()):
+    """One term set per output by the joint free run's simulation error, pooled over
+    outputs (each over its own energy), records and speeds.
+
+    ``Gn[c]``, ``norms[c]``: output ``c``'s normalised Gram matrices of ``[P, y_c]`` per
+    speed; ``seeds``: further starting sets, each a list of columns per output. Returns
+    the columns chosen for each output.
+    """
+    judge = _JointJudge(groups, Gn, norms, np.asarray(exponents), ny, nu, n_outputs, bound)
+    M = Gn.shape[2] - 1
+    ex = np.asarray(exponents)
+    items = [(c, j) for c in range(n_outputs) for j in range(M) if norms[c][:, j].min() > 0]
+    linear = [(c, j) for c, j in items if ex[j].sum() == 1]
+    seed_items = [[(c, j) for c in range(n_outputs)
+                   for j in [j for o, j in linear if o == c][:max_terms]]]
+    seed_items += [[(c, j) for c, cols in enumerate(seed) for j in list(cols)[:max_terms]]
+                   for seed in seeds]
+
+    def can_add(chosen, item):
+        return sum(1 for c, _ in chosen if c == item[0]) < max_terms
+
+    chosen, _, _ = _search(judge, items, seed_items, can_add, n_outputs * max_terms, tol,
+                           n_jobs, None)
+    return judge.split(chosen)

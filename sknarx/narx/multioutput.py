@@ -25,12 +25,15 @@ import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._atomic import write_text_atomic
 from .._json import json_safe
+from .._progress import phase
 from .._version import __version__
+from ._joint_output_error import refine_joint_output_error
 from ._orthogonal import coef_covariance, compress
+from ._simulation_selection import select_joint_by_simulation
 from ._state import check_document, model_state, restore_state
 from .freerun import FreeRunDivergenceError, free_run_mimo
 from .scheduling import SpeedScheduledNarx, _Fit, _process_structure, _spline
@@ -56,6 +59,25 @@ def _as_2d(a, what, where):
     return a
 
 
+def _is_record_list(X) -> bool:
+    """``X`` is ``(U, Y)`` or a list of such records (not a table or an array)."""
+    if isinstance(X, pd.DataFrame | np.ndarray):
+        return False
+    if isinstance(X, tuple) and len(X) == 2 and np.ndim(X[0]) in (1, 2) \
+            and not isinstance(X[0], tuple | list):
+        return True
+    if isinstance(X, list | tuple) and X and isinstance(X[0], tuple | list) \
+            and len(X[0]) == 2 and np.ndim(X[0][0]) >= 1:
+        return True
+    return False
+
+
+def _spans(sizes):
+    """``(start, stop)`` of each output's block of terms."""
+    stops = np.cumsum(sizes)
+    return list(zip(stops - np.asarray(sizes), stops, strict=True))
+
+
 def _factor(Gn):
     """A factor ``Z`` with ``Z.T @ Z == Gn`` (the compressors' symmetric square root)."""
     lam, V = np.linalg.eigh(0.5 * (Gn + Gn.T))
@@ -79,6 +101,22 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         ``(n + degree)! / (n! degree!)`` terms for ``n = n_outputs ny + n_inputs nu``.
     esr, max_terms, coef_degree, speed_basis, solver, tol, prune
         As in :class:`SpeedScheduledNarx`, for each output.
+    selection : {'one_step', 'simulation'}, default='one_step'
+        ``'simulation'``: each output's terms are chosen by the joint free run's error,
+        pooled over outputs (each over its own energy), records and speeds, from the
+        better-simulating of the linear model and the one-step structures, with pruning
+        (as :class:`SpeedScheduledNarx` does for one output); ``max_terms`` (default 30)
+        caps each output.
+    simulation_tol : float, default=0.002
+        See :class:`SpeedScheduledNarx`.
+    n_jobs : int or None, default=None
+        Parallel candidate evaluations of ``selection='simulation'`` (joblib threads).
+    refine : {None, 'output_error'}, default=None
+        ``'output_error'``: after selection, each speed's coefficients of all outputs
+        minimise the joint free-run error of its records (each output weighted by the
+        inverse of its mean square; exact sensitivities through the joint recursion),
+        then, with ``speed_basis='polynomial'``, the speed polynomials of all outputs on
+        every speed's records at once. Covariances are the output-error ones.
 
     Attributes
     ----------
@@ -123,10 +161,15 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         "solver": [StrOptions({"gram", "qr"})],
         "tol": [Interval(Real, 0, 1, closed="left")],
         "prune": ["boolean"],
+        "selection": [StrOptions({"one_step", "simulation"})],
+        "simulation_tol": [Interval(Real, 0, 1, closed="left")],
+        "n_jobs": [Integral, None],
+        "refine": [StrOptions({"output_error"}), None],
     }
 
     def __init__(self, ny=3, nu=3, degree=3, esr=0.01, max_terms=None, coef_degree=None,
-                 speed_basis="polynomial", solver="gram", tol=1e-12, prune=True):
+                 speed_basis="polynomial", solver="gram", tol=1e-12, prune=True,
+                 selection="one_step", simulation_tol=0.002, n_jobs=None, refine=None):
         self.ny = ny
         self.nu = nu
         self.degree = degree
@@ -137,35 +180,46 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         self.solver = solver
         self.tol = tol
         self.prune = prune
+        self.selection = selection
+        self.simulation_tol = simulation_tol
+        self.n_jobs = n_jobs
+        self.refine = refine
 
     # ------------------------------------------------------------------ data
-    def _records(self, X, y):
+    def _records(self, X, y, reset=True):
         """``[(speed or None, U, Y)]`` from ``fit(datasets, speeds)`` or ``fit(X, Y)``
-        with a long table ``X`` (column ``speed`` and the inputs) and ``Y`` (outputs)."""
-        if isinstance(X, pd.DataFrame):
+        with a table or array ``X`` (an optional column ``speed``, then the inputs) and
+        the outputs ``Y`` (``None`` when predicting)."""
+        if _is_record_list(X):
+            pairs = [X] if isinstance(X, tuple) else list(X)
             if y is None:
-                raise ValueError("fit(X, Y) with a table X needs the outputs Y.")
-            Y = _as_2d(y.to_numpy() if isinstance(y, pd.DataFrame | pd.Series) else y, "Y",
-                       "MultiOutputScheduledNarx")
-            if len(Y) != len(X):
-                raise ValueError(f"X has {len(X)} rows but Y has {len(Y)}; give one output "
-                                 "row per input row.")
-            if "speed" not in X.columns:
-                return [(None, X.to_numpy(dtype=float), Y)]
-            w = X["speed"].to_numpy(dtype=float)
-            U = X.drop(columns="speed").to_numpy(dtype=float)
-            cuts = np.flatnonzero(np.diff(w) != 0) + 1
-            bounds = zip(np.r_[0, cuts], np.r_[cuts, len(w)], strict=True)
-            return [(float(w[a]), U[a:b], Y[a:b]) for a, b in bounds]
-        pairs = [X] if isinstance(X, tuple) and len(X) == 2 and np.ndim(X[0]) >= 1 \
-            and np.ndim(X[0]) <= 2 and not isinstance(X[0], tuple) else list(X)
-        if y is None:
-            return [(None, U, Y) for U, Y in pairs]
-        speeds = np.atleast_1d(np.asarray(y, dtype=float))
-        if speeds.shape != (len(pairs),):
-            raise ValueError(f"Got {len(pairs)} records but {speeds.size} speeds; give one "
-                             "speed (rad/s) per record.")
-        return [(float(w), U, Y) for (U, Y), w in zip(pairs, speeds, strict=True)]
+                return [(None, U, Y) for U, Y in pairs]
+            speeds = np.atleast_1d(np.asarray(y, dtype=float))
+            if speeds.shape != (len(pairs),):
+                raise ValueError(f"Got {len(pairs)} records but {speeds.size} speeds; give "
+                                 "one speed (rad/s) per record.")
+            return [(float(w), U, Y) for (U, Y), w in zip(pairs, speeds, strict=True)]
+        has_speed = isinstance(X, pd.DataFrame) and "speed" in X.columns
+        if reset:
+            if y is None:
+                raise ValueError("MultiOutputScheduledNarx requires y to be passed, but the "
+                                 "target y is None: give the outputs (or the speeds with a "
+                                 "list of (U, Y) records).")
+            Xv, Y = validate_data(self, X, y, reset=True, multi_output=True, y_numeric=True,
+                                  dtype=np.float64)
+        else:
+            Xv, Y = validate_data(self, X, reset=False, dtype=np.float64), None
+        if has_speed:
+            j = list(X.columns).index("speed")
+            w, U = Xv[:, j], np.delete(Xv, j, axis=1)
+        else:
+            w, U = None, Xv
+        Y = None if Y is None else Y.reshape(len(Y), -1)
+        if w is None:
+            return [(None, U, Y)]
+        cuts = np.flatnonzero(np.diff(w) != 0) + 1
+        bounds = zip(np.r_[0, cuts], np.r_[cuts, len(w)], strict=True)
+        return [(float(w[a]), U[a:b], None if Y is None else Y[a:b]) for a, b in bounds]
 
     # ------------------------------------------------------------------- fit
     def fit(self, X, y=None):
@@ -178,6 +232,10 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         input columns, and the outputs ``Y`` (records: runs of equal speed).
         """
         self._validate_params()
+        for attr in ("n_features_in_", "feature_names_in_"):
+            if hasattr(self, attr):
+                delattr(self, attr)
+        self._y_1d = not _is_record_list(X) and np.asarray(y).ndim == 1
         records = self._records(X, y)
         lag = max(self.ny, self.nu)
         checked = []
@@ -213,14 +271,31 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
             norms.append(nrm)
             n_rows.append(sum(len(Y) - lag for _, Y in members))
         Gn, norms = np.stack(Gn), np.stack(norms)
-        self.estimators_ = []
+        Zs, ns = [], []
         for i in range(p):
             cols = list(range(M)) + [M + i]
-            Zi = np.stack([_factor(G[np.ix_(cols, cols)]) for G in Gn])
-            ni = norms[:, cols]
-            res, coef, cond = fit_efor(Zi, ni, self.esr, self.max_terms, self.tol,
-                                       prune=self.prune)
-            cov, sigma2, dof = coef_covariance(res, ni, n_rows)
+            Zs.append(np.stack([_factor(G[np.ix_(cols, cols)]) for G in Gn]))
+            ns.append(norms[:, cols])
+        chosen = [fit_efor(Zs[i], ns[i], self.esr, self.max_terms, self.tol,
+                           prune=self.prune)[0].selected for i in range(p)]
+        scale = np.array([max(float(np.max(np.abs(Y[:, i]))) for m in groups.values()
+                              for _, Y in m) for i in range(p)])
+        if self.selection == "simulation":
+            Gi = np.stack([np.einsum("kij,kil->kjl", Z, Z) for Z in Zs])
+            budget = self.max_terms if self.max_terms is not None else min(M, 30)
+            with phase("simulation-error selection"):
+                chosen = select_joint_by_simulation(
+                    list(groups.values()), Gi, np.stack(ns), termset.exponents, self.ny,
+                    self.nu, p, budget, tol=self.simulation_tol, bound=1e3 * scale,
+                    n_jobs=self.n_jobs, seeds=[chosen])
+            if any(not c for c in chosen):
+                raise ValueError(
+                    "selection='simulation' found no term set whose joint free run beats "
+                    "zero output for every output; use selection='one_step'.")
+        self.estimators_ = []
+        for i in range(p):
+            res, coef, cond = fit_efor(Zs[i], ns[i], None, None, self.tol, order=chosen[i])
+            cov, sigma2, dof = coef_covariance(res, ns[i], n_rows)
             fitted = _Fit(names=[names[j] for j in res.selected], coef=coef, cov=cov,
                           sigma2=sigma2, dof=dof, err=res.err, aerr=res.aerr, esr=res.esr,
                           cond=cond, speeds=speeds)
@@ -231,12 +306,66 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
                                      tol=self.tol, prune=self.prune)
             if speeds is not None:
                 sub._check_speeds(speeds)
-            sub.output_scale_ = max(float(np.max(np.abs(Y[:, i])))
-                                    for m in groups.values() for _, Y in m)
+            sub.output_scale_ = float(scale[i])
             self.estimators_.append(sub._set_fitted(fitted))
         self.n_outputs_, self.n_inputs_ = p, q
         self._set_layout()
+        if self.refine == "output_error":
+            self._refine(list(groups.values()), speeds)
         return self
+
+    def _refine(self, groups, speeds):
+        """Joint output-error refinement: per speed, then the speed polynomials."""
+        sizes = [len(t) for t in self.selected_terms_]
+        cuts = np.cumsum(sizes)[:-1]
+        bound = 1e3 * self.output_scale_
+        for k, members in enumerate(groups):
+            weights = 1.0 / np.mean(np.vstack([Y for _, Y in members]) ** 2, axis=0)
+            theta0 = np.concatenate([e.coef_per_speed_.to_numpy()[k]
+                                     for e in self.estimators_])
+            try:
+                fit = refine_joint_output_error(members, theta0, self.exponents_,
+                                                self.owner_, self.ny, self.nu, weights,
+                                                bound=bound)
+            except FloatingPointError:
+                raise FreeRunDivergenceError(
+                    "refine='output_error': the selected model's joint free run diverges on "
+                    "its own training records; use fewer terms (max_terms) or a lower term "
+                    "degree.") from None
+            for e, part, (a, b) in zip(self.estimators_, np.split(fit.theta, cuts),
+                                       _spans(sizes), strict=True):
+                e.coef_per_speed_.iloc[k] = part
+                e.coef_cov_per_speed_[k] = fit.cov[a:b, a:b]
+                e.coef_std_err_per_speed_.iloc[k] = np.sqrt(
+                    np.clip(np.diag(fit.cov[a:b, a:b]), 0.0, None))
+        for e in self.estimators_:
+            e._fit_speed_polynomials(e.coef_per_speed_.to_numpy(), e.speeds_)
+            e.coef_poly_cov_ = None
+        if (speeds is None or self.speed_basis != "polynomial"
+                or self.speed_range_[0] == self.speed_range_[1]):
+            return
+        a, b = self.speed_range_
+        J = self.estimators_[0].coef_degree_
+        s = (2.0 * speeds - a - b) / (b - a)
+        records, basis = [], []
+        for k, members in enumerate(groups):
+            records += members
+            basis += [s[k] ** np.arange(J + 1)] * len(members)
+        weights = 1.0 / np.mean(np.vstack([Y for _, Y in records]) ** 2, axis=0)
+        beta0 = np.vstack([e.coef_poly_ for e in self.estimators_])
+        try:
+            fit = refine_joint_output_error(records, beta0, self.exponents_, self.owner_,
+                                            self.ny, self.nu, weights, bound=bound,
+                                            basis=basis)
+        except FloatingPointError:
+            warnings.warn("refine='output_error': the speed polynomials through the refined "
+                          "per-speed coefficients make a training record diverge; they are "
+                          "kept as fitted.", RuntimeWarning, stacklevel=3)
+            return
+        w = J + 1
+        for e, part, (lo, hi) in zip(self.estimators_, np.split(fit.theta, cuts),
+                                     _spans(sizes), strict=True):
+            e._set_speed_polynomials(part, fit.cov[lo * w:hi * w, lo * w:hi * w])
 
     @staticmethod
     def _blocks(termset, U, Y, start):
@@ -303,9 +432,10 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         inputs, as in :meth:`fit`) from rest; returns ``(n_samples, n_outputs)``."""
         check_is_fitted(self, "estimators_")
         out = []
-        for w, U, _ in self._records(X, np.zeros((len(X), 1))):
+        for w, U, _ in self._records(X, None, reset=False):
             out.append(self.simulate(U, w, on_divergence="warn"))
-        return np.vstack(out)
+        Y = np.vstack(out)
+        return Y[:, 0] if self.n_outputs_ == 1 and self._y_1d else Y
 
     def summary(self, kind="per_speed"):
         """Each output's :meth:`SpeedScheduledNarx.summary`, with a column ``output``
@@ -356,5 +486,7 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.target_tags.multi_output = True
-        tags.target_tags.single_output = False
+        # predict free-runs the recursion from the inputs alone: on data that are not
+        # records of a dynamic system (the generic checks' random X, y) it scores poorly
+        tags.regressor_tags.poor_score = True
         return tags

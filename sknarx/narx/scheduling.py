@@ -609,15 +609,22 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                     "they are kept as fitted (least squares over the speeds); consider "
                     "speed_basis='spline'.", RuntimeWarning, stacklevel=3)
                 return
-        self.coef_poly_ = fit.theta
-        self.coef_poly_cov_ = fit.cov
+        self._set_speed_polynomials(fit.theta, fit.cov)
+
+    def _set_speed_polynomials(self, beta, cov):
+        """Speed polynomials ``beta`` (in the scaled speed) refined elsewhere, with their
+        joint covariance: the scaled form, the raw form and its standard errors."""
+        a, b = self.speed_range_
+        J = beta.shape[1] - 1
+        self.coef_poly_ = np.asarray(beta, dtype=float)
+        self.coef_poly_cov_ = np.asarray(cov, dtype=float)
         # the same polynomials in powers of omega (rad/s): linear in the scaled ones
         R = np.array([np.pad(c := Polynomial(np.eye(J + 1)[i], domain=[a, b]).convert().coef,
                              (0, J + 1 - c.size)) for i in range(J + 1)])
         names = self.selected_terms_
         cols = [f"beta{j}" for j in range(J + 1)]
-        self.speed_polynomials_ = pd.DataFrame(fit.theta @ R, index=names, columns=cols)
-        blocks = fit.cov.reshape(len(names), J + 1, len(names), J + 1)
+        self.speed_polynomials_ = pd.DataFrame(self.coef_poly_ @ R, index=names, columns=cols)
+        blocks = self.coef_poly_cov_.reshape(len(names), J + 1, len(names), J + 1)
         se = np.array([np.sqrt(np.clip(np.diag(R.T @ blocks[m, :, m, :] @ R), 0, None))
                        for m in range(len(names))])
         self.speed_polynomials_std_err_ = pd.DataFrame(se, index=names, columns=cols)
