@@ -17,7 +17,8 @@ outputs; the score is the NRMSE of that free run (percent of the record's RMS).
   one for fastcan) over the concatenated records, 20 terms.
 
 Fit time is the median of the wall times (one BLAS thread); peak memory is traced by
-``tracemalloc``.
+``tracemalloc``. A peer gets ``--peer-timeout`` seconds (default 600) for one fit and
+its scores, in a process of its own; one that takes longer is reported as such.
 """
 
 from __future__ import annotations
@@ -163,15 +164,43 @@ def fastcan_methods(train, speeds, held, held_speeds, repeat):
     return out
 
 
+def _peer(name, queue):
+    train, speeds, held, held_speeds = sweep()
+    with threadpool_limits(limits=1, user_api="blas"):
+        fn = sysidentpy_method if name == "sysidentpy" else fastcan_methods
+        queue.put(fn(train, speeds, held, held_speeds, 1))
+
+
+def run_peer(name, timeout):
+    """A peer's results, or a note that it did not finish within ``timeout`` s."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_peer, args=(name, queue))
+    proc.start()
+    try:
+        return queue.get(timeout=timeout)
+    except Exception:  # noqa: BLE001 -- queue.Empty: the peer ran out of time
+        return {f"{name} (speed as input)": {
+            "fit_median_s": float("nan"), "fit_times_s": [], "peak_traced_mb": float("nan"),
+            "nrmse_percent": {"error": f"did not finish within {timeout:g} s"}}}
+    finally:
+        proc.terminate()
+        proc.join()
+
+
 def main(argv=None, repeat=3):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     summary_flag(ap)
+    ap.add_argument("--peer-timeout", type=float, default=600.0,
+                    help="seconds each peer gets (default 600)")
     args = ap.parse_args(argv)
     train, speeds, held, held_speeds = sweep()
     with threadpool_limits(limits=1, user_api="blas"):
         results = sknarx_methods(train, speeds, held, held_speeds, repeat)
-        results.update(sysidentpy_method(train, speeds, held, held_speeds, repeat))
-        results.update(fastcan_methods(train, speeds, held, held_speeds, repeat))
+    for peer in ("sysidentpy", "fastcan"):
+        results.update(run_peer(peer, args.peer_timeout))
     rows = []
     for name, r in results.items():
         s = r["nrmse_percent"]
