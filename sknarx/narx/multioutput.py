@@ -31,12 +31,14 @@ from .._atomic import write_text_atomic
 from .._json import json_safe
 from .._progress import phase
 from .._version import __version__
+from ._fit_paths import _Fit
 from ._joint_output_error import refine_joint_output_error
 from ._orthogonal import coef_covariance, compress
 from ._simulation_selection import select_joint_by_simulation
+from ._speed_functions import _spline, fit_speed_polynomials, set_speed_polynomials
 from ._state import check_document, model_state, restore_state
 from .freerun import FreeRunDivergenceError, free_run_mimo
-from .scheduling import SpeedScheduledNarx, _Fit, _process_structure, _spline
+from .scheduling import SpeedScheduledNarx, _process_structure
 from .selection import fit_efor
 from .terms import TermSet, monomial_exponents, term_names
 
@@ -339,7 +341,7 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
                 e.coef_std_err_per_speed_.iloc[k] = np.sqrt(
                     np.clip(np.diag(fit.cov[a:b, a:b]), 0.0, None))
         for e in self.estimators_:
-            e._fit_speed_polynomials(e.coef_per_speed_.to_numpy(), e.speeds_)
+            fit_speed_polynomials(e, e.coef_per_speed_.to_numpy(), e.speeds_)
             e.coef_poly_cov_ = None
         if (speeds is None or self.speed_basis != "polynomial"
                 or self.speed_range_[0] == self.speed_range_[1]):
@@ -365,7 +367,7 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
         w = J + 1
         for e, part, (lo, hi) in zip(self.estimators_, np.split(fit.theta, cuts),
                                      _spans(sizes), strict=True):
-            e._set_speed_polynomials(part, fit.cov[lo * w:hi * w, lo * w:hi * w])
+            set_speed_polynomials(e, part, fit.cov[lo * w:hi * w, lo * w:hi * w])
 
     @staticmethod
     def _blocks(termset, U, Y, start):

@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass
-from itertools import chain
 from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from numpy.polynomial import Polynomial
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
@@ -19,36 +16,25 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._atomic import write_text_atomic
 from .._json import json_safe
-from .._progress import phase
-from ._design import check_nan_rows, read_term_matrix
-from ._els import extended_least_squares
-from ._orthogonal import coef_covariance, compress, termset_blocks
-from ._output_error import refine_output_error, refine_speed_functions
-from ._simulation_selection import select_by_simulation
+from ._design import check_nan_rows
+from ._fit_paths import _Fit, fit_sweep, fit_terms, is_sweep
+from ._intervals import SimulationInterval, simulate_interval
+from ._speed_functions import (
+    SpeedExtrapolationWarning,
+    _spline,
+    coefficient_std,
+    coefficients_at,
+    fit_speed_polynomials,
+    refine_speed_functions_of,
+)
 from ._speed_map import raw_power_map, speed_weights
 from ._state import check_document, model_state, restore_state
 from .freerun import FreeRunDivergenceError, free_run
-from .selection import compress_groups, fit_efor, warn_conditioning
-from .sweep_data import as_datasets, check_series, read_sample_table
-from .terms import (
-    TermSet,
-    channel_counts,
-    monomial_exponents,
-    noise_term_name,
-    parse_terms,
-    split_noise_terms,
-    term_names,
-)
+from .selection import warn_conditioning
+from .sweep_data import read_sample_table
+from .terms import channel_counts, parse_terms, split_noise_terms
 
 __all__ = ["SpeedScheduledNarx", "SpeedExtrapolationWarning", "SimulationInterval"]
-
-
-def _spline(speeds, coef):
-    from scipy.interpolate import CubicSpline
-
-    order = np.argsort(speeds)
-    return CubicSpline(np.asarray(speeds)[order], np.asarray(coef)[order], axis=0,
-                       bc_type="natural")
 
 
 def _process_structure(names):
@@ -60,112 +46,6 @@ def _process_structure(names):
         return parse_terms([names[i] for i in process])
     except ValueError:
         return None, None, None
-
-
-def _sqrt_psd(C):
-    """A factor ``F`` with ``F F^T = C`` for a covariance that may be singular."""
-    lam, V = np.linalg.eigh(0.5 * (C + C.T))
-    return V * np.sqrt(np.clip(lam, 0.0, None))
-
-
-class SpeedExtrapolationWarning(UserWarning):
-    """A requested speed lies outside the range of the fitted speeds."""
-
-
-@dataclass
-class SimulationInterval:
-    """Monte-Carlo prediction band of a free run (see :meth:`SpeedScheduledNarx.simulate_interval`).
-
-    Attributes
-    ----------
-    y : ndarray (n_samples,)
-        Free run with the fitted coefficients (NaN after a divergence).
-    lower, upper : ndarray (n_samples,)
-        Pointwise ``(1 - level)/2`` and ``(1 + level)/2`` quantiles over the draws that
-        stayed bounded (NaN where none did).
-    level : float
-    n_draws : int
-    diverged_fraction : float
-        Share of the coefficient draws whose free run diverged: a model close to
-        instability at this speed shows it here before its nominal run does.
-    """
-
-    y: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    level: float
-    n_draws: int
-    diverged_fraction: float
-
-
-@dataclass
-class _Fit:
-    """What one fitting path hands to ``fit`` (per dataset k, term m)."""
-
-    names: list
-    coef: np.ndarray  # (K, m)
-    cov: np.ndarray  # (K, m, m)
-    sigma2: np.ndarray  # (K,)
-    dof: np.ndarray  # (K,)
-    err: np.ndarray  # (K, m) fraction
-    aerr: np.ndarray  # (m,) percent
-    esr: float  # percent
-    cond: np.ndarray  # (K,)
-    speeds: np.ndarray | None
-    n_iter: int = 0
-    records: list | None = None  # per speed, its (u, y) records (the direct API only)
-
-
-def _with_noise_model(fitted: _Fit, els, y_list, process=None, noise_pos=None) -> _Fit:
-    """Fold an extended-least-squares result into the fit.
-
-    Without ``process`` (``fit(datasets, speeds)``) the admitted noise terms are
-    appended after the process terms; with it (a Pipeline's term matrix) the
-    columns keep the order of ``X``: ``process`` and ``noise_pos`` (ascending lag)
-    are their positions.
-    """
-    if not els.noise_lags:  # white equation error: NARX least squares is already right
-        fitted.n_iter = els.n_iter
-        return fitted
-    yy = np.array([float(y @ y) for y in y_list])
-    esr = float(100.0 * np.mean(els.sigma2 * els.dof / yy))
-    if process is None:
-        names = fitted.names + [noise_term_name(lag) for lag in els.noise_lags]
-        return _Fit(names=names, coef=els.coef, cov=els.cov, sigma2=els.sigma2, dof=els.dof,
-                    err=np.hstack([fitted.err, els.err]),
-                    aerr=np.concatenate([fitted.aerr, 100.0 * els.err.mean(axis=0)]),
-                    esr=esr, cond=fitted.cond, speeds=fitted.speeds, n_iter=els.n_iter)
-    perm = np.asarray(list(process) + list(noise_pos))  # ELS order -> column of X
-    coef = np.empty_like(els.coef)
-    coef[:, perm] = els.coef
-    cov = np.empty_like(els.cov)
-    cov[:, perm[:, None], perm[None, :]] = els.cov
-    return _Fit(names=fitted.names, coef=coef, cov=cov, sigma2=els.sigma2, dof=els.dof,
-                err=fitted.err, aerr=fitted.aerr, esr=esr, cond=fitted.cond,
-                speeds=fitted.speeds, n_iter=els.n_iter)
-
-
-def _n_records(X) -> int:
-    if isinstance(X, tuple) and len(X) == 2 and np.ndim(X[0]) == 1:
-        return 1
-    return len(X)
-
-
-def _group_by_speed(datasets):
-    """``[(speed, [(index, dataset), ...]), ...]`` in order of first appearance."""
-    groups: dict = {}
-    for k, d in enumerate(datasets):
-        groups.setdefault(d.speed, []).append((k, d))
-    return list(groups.items())
-
-
-def _is_sweep(X) -> bool:
-    if isinstance(X, pd.DataFrame):
-        return "u" in X.columns
-    if isinstance(X, (list, tuple)) and len(X) > 0:
-        first = X[0]
-        return isinstance(first, (list, tuple)) and len(first) == 2 and np.ndim(first[0]) == 1
-    return False
 
 
 class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
@@ -414,7 +294,7 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         for attr in ("n_features_in_", "feature_names_in_"):
             if hasattr(self, attr):
                 delattr(self, attr)
-        fitted = self._fit_sweep(X, y) if _is_sweep(X) else self._fit_terms(X, y)
+        fitted = fit_sweep(self, X, y) if is_sweep(X) else fit_terms(self, X, y)
         return self._set_fitted(fitted)
 
     def _set_fitted(self, fitted: _Fit):
@@ -439,195 +319,13 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         self.speeds_ = speeds
         self.coef_degree_ = self._resolve_degree(1 if speeds is None else np.unique(speeds).size)
         self.exponents_, self.ny_, self.nu_ = _process_structure(names)
-        self._fit_speed_polynomials(fitted.coef, speeds)
+        fit_speed_polynomials(self, fitted.coef, speeds)
         self.coef_poly_cov_ = None
         if (self.refine == "output_error" and fitted.records is not None
                 and self.speed_basis == "polynomial" and self.speed_range_ is not None
                 and self.speed_range_[0] < self.speed_range_[1]):
-            self._refine_speed_functions(fitted)
+            refine_speed_functions_of(self, fitted)
         return self
-
-    def _fit_sweep(self, X, speeds) -> _Fit:
-        no_speeds = speeds is None and not isinstance(X, pd.DataFrame)
-        datasets = as_datasets(X, np.zeros(_n_records(X)) if no_speeds else speeds)
-        groups = _group_by_speed(datasets)  # records of one speed share coefficients
-        ws = None if no_speeds else np.array([w for w, _ in groups])
-        if ws is not None:
-            self._check_speeds(ws)
-        if self.refine == "output_error" and self.noise_lags > 0:
-            raise ValueError(
-                "refine='output_error' fits the free run, which has no noise terms; set "
-                "noise_lags=0 (or refine=None for a NARMAX model).")
-        lag = max(self.ny, self.nu)
-        termset = TermSet(monomial_exponents(self.ny, self.nu, self.degree), self.ny, self.nu)
-        names_all = term_names(termset.exponents, self.ny, self.nu)
-        width = len(names_all) + 1
-        Zs, norms, records, scale = [], [], [], 0.0
-        for _, members in groups:
-            checked = []
-            for k, d in members:
-                where = (f"Record {k}" if no_speeds
-                         else f"Dataset {k} (speed {d.speed:g} rad/s)")
-                u, yk = check_series(d.u, d.y, None if no_speeds else d.speed, lag + 2, where)
-                if self.nu > 0 and self.degree > 0 and np.ptp(u) == 0:
-                    raise ValueError(
-                        f"{where}: the input u is constant ({u[0]:g}), so the input terms "
-                        "are collinear with the constant and the regression is singular. "
-                        "Use a record where the input varies (e.g. the unbalance force "
-                        "m e w^2 cos wt).")
-                if not np.any(yk[lag:]):
-                    raise ValueError(f"{where}: the output y is identically zero.")
-                checked.append((u, yk))
-                scale = max(scale, float(np.max(np.abs(yk))))
-            Z, nrm = compress(chain.from_iterable(termset_blocks(termset, u, yk, lag)
-                                                  for u, yk in checked), width, self.solver)
-            Zs.append(Z)
-            norms.append(nrm)
-            records.append(checked)
-        self.output_scale_ = scale
-        Z = np.stack(Zs)
-        norms = np.stack(norms)
-        if self.selection == "simulation":
-            one_step = fit_efor(Z, norms, self.esr, self.max_terms, self.tol,
-                                prune=self.prune)[0].selected
-            chosen = self._select_by_simulation(records, Z, norms, termset, [one_step])
-            res, coef, cond = fit_efor(Z, norms, None, None, self.tol, order=chosen)
-        else:
-            res, coef, cond = fit_efor(Z, norms, self.esr, self.max_terms, self.tol,
-                                       prune=self.prune)
-        n_rows = [sum(len(yk) - lag for _, yk in g) for g in records]
-        cov, sigma2, dof = coef_covariance(res, norms, n_rows)
-        fitted = _Fit(names=[names_all[j] for j in res.selected], coef=coef, cov=cov,
-                      sigma2=sigma2, dof=dof, err=res.err, aerr=res.aerr, esr=res.esr,
-                      cond=cond, speeds=ws)
-        if self.refine == "output_error":
-            self._refine_output_error(fitted, records, termset.exponents[res.selected])
-            fitted.records = records
-        if self.noise_lags > 0:
-            chosen = TermSet(termset.exponents[res.selected], self.ny, self.nu)
-            P_list = [np.vstack([chosen.evaluate(u, yk, lag, len(yk)) for u, yk in g])
-                      for g in records]
-            y_list = [np.concatenate([yk[lag:] for _, yk in g]) for g in records]
-            els = extended_least_squares(P_list, y_list, coef, self.noise_lags)
-            fitted = _with_noise_model(fitted, els, y_list)
-        return fitted
-
-    def _select_by_simulation(self, records, Z, norms, termset, seeds):
-        """Dictionary columns chosen by pooled free-run error (see
-        :mod:`sknarx.narx._simulation_selection`)."""
-        M = termset.exponents.shape[0]
-        budget = self.max_terms if self.max_terms is not None else min(M, 30)
-        Gn = np.einsum("kij,kil->kjl", Z, Z)
-        with phase("simulation-error selection") as bar:
-            result = select_by_simulation(
-                records, Gn, norms, termset.exponents, self.ny, self.nu, budget,
-                tol=self.simulation_tol, bound=self._bound(), n_jobs=self.n_jobs,
-                progress=lambda n: bar.set_postfix_str(f"{n} terms"), seeds=seeds)
-        if not result.selected:
-            raise ValueError(
-                "selection='simulation' found no term whose model free-runs better than "
-                "zero output on the training records; check that the input drives the "
-                "output, or use selection='one_step'.")
-        return result.selected
-
-    def _refine_output_error(self, fitted: _Fit, records, exponents):
-        """Per speed, the coefficients that minimise the free-run error of its records
-        (exact sensitivities), with their output-error covariance."""
-        with phase("output-error refinement") as bar:
-            for k, group in enumerate(records):
-                try:
-                    oe = refine_output_error(group, fitted.coef[k], exponents, self.ny,
-                                             self.nu, bound=self._bound())
-                except FloatingPointError:
-                    where = ("" if fitted.speeds is None
-                             else f" at {fitted.speeds[k]:g} rad/s")
-                    raise FreeRunDivergenceError(
-                        f"refine='output_error': the selected model's free run diverges on "
-                        f"its own training records{where}, so there is no simulation error "
-                        "to refine from; use selection='simulation' (it never keeps such a "
-                        "structure), fewer terms or a lower term degree.") from None
-                fitted.coef[k] = oe.theta
-                fitted.cov[k] = oe.cov
-                fitted.sigma2[k] = oe.sigma2
-                fitted.dof[k] = oe.dof
-                fitted.n_iter = max(fitted.n_iter, oe.n_iter)
-                bar.set_postfix_str(f"{k + 1}/{len(records)} speed(s)")
-
-    def _fit_terms(self, X, y) -> _Fit:
-        tm = read_term_matrix(self, X, y, "SpeedScheduledNarx")
-        speeds = tm.dataset_speeds()
-        if speeds is not None:
-            self._check_speeds(speeds)
-        Z, norms = compress_groups(tm, self.solver)
-        try:
-            res, coef, cond = fit_efor(Z, norms, None, None, self.tol,
-                                       order=range(tm.P.shape[1]))
-        except np.linalg.LinAlgError as exc:
-            raise ValueError(
-                f"SpeedScheduledNarx: the given terms are linearly dependent ({exc}); "
-                "drop the redundant columns."
-            ) from exc
-        ok = ~np.all(np.isnan(tm.P), axis=1)
-        self.output_scale_ = float(np.max(np.abs(tm.y[ok])))
-        n_rows = [int(tm.valid_rows(a, b).sum()) for a, b in tm.groups]
-        cov, sigma2, dof = coef_covariance(res, norms, n_rows)
-        fitted = _Fit(names=list(tm.names), coef=coef, cov=cov, sigma2=sigma2, dof=dof,
-                      err=res.err, aerr=res.aerr, esr=res.esr, cond=cond, speeds=speeds)
-        process, noise, lags = split_noise_terms(tm.names)
-        if noise:
-            # The dictionary's noise columns hold first-stage innovation estimates: iterate
-            # them into prediction errors of this model (extended least squares).
-            rows = [tm.valid_rows(a, b) for a, b in tm.groups]
-            P_list = [tm.P[a:b][r][:, process] for (a, b), r in zip(tm.groups, rows,
-                                                                     strict=True)]
-            y_list = [tm.y[a:b][r] for (a, b), r in zip(tm.groups, rows, strict=True)]
-            order = np.argsort(lags)
-            els = extended_least_squares(P_list, y_list, coef[:, process], max(lags),
-                                         select=False, candidates=[lags[i] for i in order])
-            fitted = _with_noise_model(fitted, els, y_list, process,
-                                       [noise[i] for i in order])
-        return fitted
-
-    def _refine_speed_functions(self, fitted: _Fit):
-        """The speed polynomials that minimise the free-run error of every speed's
-        records at once (each speed weighted by its simulation-error variance), with
-        their joint covariance ``coef_poly_cov_``."""
-        a, b = self.speed_range_
-        J = self.coef_degree_
-        s = (2.0 * np.asarray(fitted.speeds) - a - b) / (b - a)
-        basis = s[:, None] ** np.arange(J + 1)
-        with phase("output-error refinement of the speed functions"):
-            try:
-                fit = refine_speed_functions(fitted.records, basis, self.coef_poly_,
-                                             self.exponents_, self.ny_, self.nu_,
-                                             np.asarray(fitted.sigma2, dtype=float),
-                                             bound=self._bound())
-            except FloatingPointError:
-                warnings.warn(
-                    "refine='output_error': the speed polynomials through the refined "
-                    "per-speed coefficients make a training record's free run diverge, so "
-                    "they are kept as fitted (least squares over the speeds); consider "
-                    "speed_basis='spline'.", RuntimeWarning, stacklevel=3)
-                return
-        self._set_speed_polynomials(fit.theta, fit.cov)
-
-    def _set_speed_polynomials(self, beta, cov):
-        """Speed polynomials ``beta`` (in the scaled speed) refined elsewhere, with their
-        joint covariance: the scaled form, the raw form and its standard errors."""
-        a, b = self.speed_range_
-        J = beta.shape[1] - 1
-        self.coef_poly_ = np.asarray(beta, dtype=float)
-        self.coef_poly_cov_ = np.asarray(cov, dtype=float)
-        # the same polynomials in powers of omega (rad/s): linear in the scaled ones
-        R = np.array([np.pad(c := Polynomial(np.eye(J + 1)[i], domain=[a, b]).convert().coef,
-                             (0, J + 1 - c.size)) for i in range(J + 1)])
-        names = self.selected_terms_
-        cols = [f"beta{j}" for j in range(J + 1)]
-        self.speed_polynomials_ = pd.DataFrame(self.coef_poly_ @ R, index=names, columns=cols)
-        blocks = self.coef_poly_cov_.reshape(len(names), J + 1, len(names), J + 1)
-        se = np.array([np.sqrt(np.clip(np.diag(R.T @ blocks[m, :, m, :] @ R), 0, None))
-                       for m in range(len(names))])
-        self.speed_polynomials_std_err_ = pd.DataFrame(se, index=names, columns=cols)
 
     def _resolve_degree(self, n_speeds):
         """The speed-polynomial degree for ``n_speeds`` speeds: ``coef_degree``, or when
@@ -658,43 +356,6 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
                 "lower coef_degree."
             )
 
-    def _fit_speed_polynomials(self, coef, speeds):
-        names = self.selected_terms_
-        if speeds is None:
-            # No speeds: one operating point, constant coefficients.
-            self.speed_range_ = None
-            self.coef_poly_ = coef[:1].T.copy()
-            self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names, columns=["beta0"])
-            self.speed_polynomials_std_err_ = pd.DataFrame(
-                self.coef_std_err_per_speed_.to_numpy()[:1].T, index=names, columns=["beta0"])
-            return
-        a, b = float(np.min(speeds)), float(np.max(speeds))
-        self.speed_range_ = (a, b)
-        self.coef_spline_ = None
-        if self.speed_basis == "spline":
-            self.coef_spline_ = _spline(speeds, coef)
-        J = self.coef_degree_
-        if a == b:  # a single speed (then coef_degree is 0): constant coefficients
-            self.coef_poly_ = coef[:1].T.copy()
-            self.speed_polynomials_ = pd.DataFrame(self.coef_poly_, index=names,
-                                                   columns=["beta0"])
-            self.speed_polynomials_std_err_ = pd.DataFrame(
-                self.coef_std_err_per_speed_.to_numpy()[:1].T, index=names, columns=["beta0"])
-            return
-        polys = [Polynomial.fit(speeds, coef[:, m], J, domain=[a, b]) for m in range(coef.shape[1])]
-        self.coef_poly_ = np.array([np.pad(p.coef, (0, J + 1 - p.coef.size)) for p in polys])
-        raw_coefs = [p.convert().coef for p in polys]  # powers of omega in rad/s
-        raw = np.array([np.pad(c, (0, J + 1 - c.size)) for c in raw_coefs])
-        self.speed_polynomials_ = pd.DataFrame(
-            raw, index=names, columns=[f"beta{j}" for j in range(J + 1)]
-        )
-        var = self.coef_std_err_per_speed_.to_numpy() ** 2
-        self.speed_polynomials_std_err_ = pd.DataFrame(
-            np.sqrt(raw_power_map(speeds, J) ** 2 @ var).T, index=names,
-            columns=[f"beta{j}" for j in range(J + 1)]
-        )
-
-    # ------------------------------------------------------------ evaluate
     def coefficients_at(self, omega, return_std=False):
         """Coefficients ``theta(omega)`` of the selected terms.
 
@@ -714,55 +375,10 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
             Only with ``return_std=True``.
         """
         check_is_fitted(self, "coef_poly_")
-        theta = self._coefficients_at(omega)
+        theta = coefficients_at(self, omega)
         if not return_std:
             return theta
-        return theta, self._coefficient_std(omega)
-
-    def _coefficient_std(self, omega):
-        if self.coef_cov_per_speed_ is None:
-            raise ValueError(
-                "This model carries no coefficient covariance (it was read from a format-1 "
-                "model file); refit it to get standard errors."
-            )
-        w = np.asarray(omega, dtype=float)
-        C = getattr(self, "coef_poly_cov_", None)
-        if C is not None:  # speed functions refined jointly: their own covariance
-            a, b = self.speed_range_
-            J = self.coef_poly_.shape[1]
-            V = (((2.0 * w.reshape(-1) - a - b) / (b - a))[:, None]) ** np.arange(J)
-            m = self.coef_poly_.shape[0]
-            blocks = C.reshape(m, J, m, J)
-            var = np.stack([np.einsum("nj,jk,nk->n", V, blocks[i, :, i, :], V)
-                            for i in range(m)], axis=1)
-            return np.sqrt(np.clip(var, 0.0, None)).reshape(w.shape + (m,))
-        var = self.coef_std_err_per_speed_.to_numpy() ** 2
-        if self.speed_range_ is None:
-            return np.array(np.broadcast_to(np.sqrt(var[0]), w.shape + (var.shape[1],)))
-        L = speed_weights(self.speeds_, w.reshape(-1), self.speed_basis, self.coef_degree_)
-        return np.sqrt(L**2 @ var).reshape(w.shape + (var.shape[1],))
-
-    def _coefficients_at(self, omega):
-        w = np.asarray(omega, dtype=float)
-        if self.speed_range_ is None:
-            out = np.broadcast_to(self.coef_poly_[:, 0], w.shape + (self.coef_poly_.shape[0],))
-            return np.array(out)
-        if not np.all(np.isfinite(w)):
-            raise ValueError("omega must be finite (rad/s).")
-        a, b = self.speed_range_
-        if np.any((w < a) | (w > b)):
-            lo, hi = float(np.min(w)), float(np.max(w))
-            warnings.warn(
-                f"Speed(s) {lo:g}..{hi:g} rad/s lie outside the fitted range {a:g}..{b:g} "
-                "rad/s; the coefficient polynomials are extrapolated and the model may be "
-                "inaccurate or unstable there.",
-                SpeedExtrapolationWarning,
-                stacklevel=3,
-            )
-        if getattr(self, "coef_spline_", None) is not None:
-            return self.coef_spline_(w)
-        s = (2.0 * w - a - b) / (b - a) if b > a else np.zeros_like(w)
-        return np.moveaxis(np.polynomial.polynomial.polyval(s, self.coef_poly_.T), 0, -1)
+        return theta, coefficient_std(self, omega)
 
     def simulate(self, u, omega=None, y0=None, on_divergence="raise"):
         """Free-run the model from the input alone (model predicted output).
@@ -867,59 +483,8 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
         -------
         SimulationInterval
         """
-        u, w = self._check_run(u, omega)
-        if not (isinstance(n_draws, Integral) and n_draws >= 1):
-            raise ValueError(f"n_draws must be a positive integer, got {n_draws!r}.")
-        if not 0 < level < 1:
-            raise ValueError(f"level must lie in (0, 1), got {level!r}.")
-        if self.coef_cov_per_speed_ is None:
-            self._coefficient_std(0.0)  # raises the no-covariance error
-        rng = check_random_state(random_state)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            y_nominal = self.simulate(u, float(w) if w.ndim == 0 else w, y0=y0,
-                                      on_divergence="warn")
-        process = split_noise_terms(self.selected_terms_)[0]
-        uniq, inv = np.unique(np.atleast_1d(w), return_inverse=True)
-        if self.speed_range_ is None:
-            L = np.ones((uniq.size, 1))
-        else:
-            L = speed_weights(self.speeds_, uniq, self.speed_basis, self.coef_degree_)
-        Theta = self.coef_per_speed_.to_numpy()
-        chol = [_sqrt_psd(C) for C in self.coef_cov_per_speed_]
-        C_poly = getattr(self, "coef_poly_cov_", None)
-        if C_poly is not None:  # speed functions refined jointly: draw them
-            a, b = self.speed_range_
-            s_uniq = (2.0 * uniq - a - b) / (b - a)
-            F_poly = _sqrt_psd(C_poly)
-        runs = np.full((n_draws, u.size), np.nan)
-        diverged = 0
-        for d in range(n_draws):
-            if C_poly is not None:
-                beta = self.coef_poly_ + (F_poly @ rng.standard_normal(C_poly.shape[0])
-                                          ).reshape(self.coef_poly_.shape)
-                theta = np.polynomial.polynomial.polyval(s_uniq, beta.T).T
-                theta = np.atleast_2d(theta)[:, process]
-            else:
-                draw = np.stack([t + c @ rng.standard_normal(t.size)
-                                 for t, c in zip(Theta, chol, strict=True)])
-                theta = (L @ draw)[:, process]
-            theta = theta if w.ndim == 0 else theta[inv]
-            y, at = free_run(u, theta, self.exponents_, self.ny_, self.nu_, y0=y0,
-                             bound=self._bound())
-            if at >= 0:
-                diverged += 1
-            else:
-                runs[d] = y
-        q = [(1 - level) / 2, (1 + level) / 2]
-        if diverged == n_draws:
-            warnings.warn(f"All {n_draws} coefficient draws diverged; the band is NaN.",
-                          RuntimeWarning, stacklevel=2)
-            lower = upper = np.full(u.size, np.nan)
-        else:
-            lower, upper = np.nanquantile(runs, q, axis=0)
-        return SimulationInterval(y=y_nominal, lower=lower, upper=upper, level=float(level),
-                                  n_draws=int(n_draws), diverged_fraction=diverged / n_draws)
+        return simulate_interval(self, u, omega, y0, n_draws, level,
+                                 random_state)
 
     def predict(self, X):
         """Predict the output.
