@@ -77,6 +77,7 @@ def _with_noise_model(fitted: _Fit, els, y_list, process=None, noise_pos=None) -
 
 
 def _n_records(X) -> int:
+    """Number of ``(u, y)`` records in the direct API's first argument."""
     if isinstance(X, tuple) and len(X) == 2 and np.ndim(X[0]) == 1:
         return 1
     return len(X)
@@ -91,6 +92,8 @@ def _group_by_speed(datasets):
 
 
 def is_sweep(X) -> bool:
+    """``X`` is a sweep (a long table with ``u``, or ``(u, y)`` records), not a term
+    matrix."""
     if isinstance(X, pd.DataFrame):
         return "u" in X.columns
     if isinstance(X, (list, tuple)) and len(X) > 0:
@@ -101,6 +104,10 @@ def is_sweep(X) -> bool:
 
 
 def fit_sweep(est, X, speeds) -> _Fit:
+    """``fit(datasets, speeds)``: records grouped by speed, each group compressed in one
+    chunked pass over the full dictionary; terms by one-step EFOR or by free-run error;
+    least-squares coefficients per speed, then optionally output-error refinement or
+    NARMAX noise terms. Without speeds the records are one operating point."""
     no_speeds = speeds is None and not isinstance(X, pd.DataFrame)
     datasets = as_datasets(X, np.zeros(_n_records(X)) if no_speeds else speeds)
     groups = _group_by_speed(datasets)  # records of one speed share coefficients
@@ -210,6 +217,8 @@ def refine_per_speed(est, fitted: _Fit, records, exponents):
 
 
 def fit_terms(est, X, y) -> _Fit:
+    """``fit(X, y)`` in a Pipeline: the given term columns, in their order, per dataset
+    of the ``speed`` index; noise columns are iterated by extended least squares."""
     tm = read_term_matrix(est, X, y, "SpeedScheduledNarx")
     speeds = tm.dataset_speeds()
     if speeds is not None:
