@@ -18,13 +18,11 @@ from __future__ import annotations
 import json
 import warnings
 from itertools import chain
-from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin
-from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._atomic import write_text_atomic
@@ -152,22 +150,9 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
     True
     """
 
-    _parameter_constraints = {
-        "ny": [Interval(Integral, 0, None, closed="left")],
-        "nu": [Interval(Integral, 0, None, closed="left")],
-        "degree": [Interval(Integral, 0, None, closed="left")],
-        "esr": [Interval(Real, 0, 100, closed="both")],
-        "max_terms": [Interval(Integral, 1, None, closed="left"), None],
-        "coef_degree": [Interval(Integral, 0, None, closed="left"), None],
-        "speed_basis": [StrOptions({"polynomial", "spline"})],
-        "solver": [StrOptions({"gram", "qr"})],
-        "tol": [Interval(Real, 0, 1, closed="left")],
-        "prune": ["boolean"],
-        "selection": [StrOptions({"one_step", "simulation"})],
-        "simulation_tol": [Interval(Real, 0, 1, closed="left")],
-        "n_jobs": [Integral, None],
-        "refine": [StrOptions({"output_error"}), None],
-    }
+    # the single-output model's, without its NARMAX noise terms (a free-run model)
+    _parameter_constraints = {k: v for k, v in SpeedScheduledNarx._parameter_constraints.items()
+                              if k != "noise_lags"}
 
     def __init__(self, ny=3, nu=3, degree=3, esr=0.01, max_terms=None, coef_degree=None,
                  speed_basis="polynomial", solver="gram", tol=1e-12, prune=True,
