@@ -36,6 +36,19 @@ def timeit(fn, repeat=5):
     return statistics.median(times), times, out
 
 
+def fit_cost(fit, repeat):
+    """``fit()``'s median and all wall times (s) over ``repeat`` calls and the peak
+    memory one more call traces (MB); returns the last fitted model and the figures."""
+    import tracemalloc
+
+    t, times, model = timeit(fit, repeat)
+    tracemalloc.start()
+    fit()
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return model, {"fit_median_s": t, "fit_times_s": times, "peak_traced_mb": peak / 2**20}
+
+
 def machine() -> dict:
     """Where and with what a benchmark ran: commit, Python, CPUs, BLAS, versions."""
     import subprocess

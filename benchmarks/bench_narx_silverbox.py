@@ -24,11 +24,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tracemalloc
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import summary_flag, table, timeit, write_json  # noqa: E402, I001
+from _common import fit_cost, summary_flag, table, write_json  # noqa: E402, I001
 
 import numpy as np  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
@@ -48,19 +47,14 @@ def _rmse_mv(y_sim, y):
 
 
 def _measure(fit, simulate, repeat):
-    t, times, model = timeit(fit, repeat)
-    tracemalloc.start()
-    fit()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    model, cost = fit_cost(fit, repeat)
     try:
         full, within = _rmse_mv(*simulate(model))
         diverged = not np.isfinite(full)
     except Exception as exc:  # noqa: BLE001 -- a peer's failure is a result
         full = within = float("nan")
         diverged = f"{type(exc).__name__}: {exc}"[:200]
-    return model, {"fit_median_s": t, "fit_times_s": times, "peak_traced_mb": peak / 2**20,
-                   "rmse_full_arrow_mV": full, "rmse_within_range_mV": within,
+    return model, {**cost, "rmse_full_arrow_mV": full, "rmse_within_range_mV": within,
                    "diverged": diverged}
 
 

@@ -25,12 +25,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tracemalloc
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import summary_flag, table, timeit, write_json  # noqa: E402, I001
+from _common import fit_cost, summary_flag, table, write_json  # noqa: E402, I001
 
 import numpy as np  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
@@ -63,17 +62,12 @@ def nrmse(y_sim, y):
 
 
 def measure(fit, score, repeat):
-    t, times, model = timeit(fit, repeat)
-    tracemalloc.start()
-    fit()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    model, cost = fit_cost(fit, repeat)
     try:
         scores = score(model)
     except Exception as exc:  # noqa: BLE001 -- a peer's failure is a result
         scores = {"error": f"{type(exc).__name__}: {exc}"[:200]}
-    return model, {"fit_median_s": t, "fit_times_s": times, "peak_traced_mb": peak / 2**20,
-                   "nrmse_percent": scores}
+    return model, {**cost, "nrmse_percent": scores}
 
 
 def sknarx_methods(train, speeds, held, held_speeds, repeat):

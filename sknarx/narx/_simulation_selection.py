@@ -51,6 +51,27 @@ class SimulationSelection:
     history: list  # (action, column, error) of every accepted addition and pruning
 
 
+def ls_coef(Gn, norms, cols):
+    """Per speed, the least-squares coefficients of the dictionary columns ``cols`` in
+    raw units, from the normalised Gram matrices ``Gn`` (K, M+1, M+1; last: the output)
+    and their column norms; ``None`` when the columns are linearly dependent."""
+    cols = list(cols)
+    K, M1 = norms.shape
+    out = np.zeros((K, len(cols)))
+    for k in range(K):
+        A = Gn[k][np.ix_(cols, cols)]
+        b = Gn[k][cols, M1 - 1]
+        try:
+            c = np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            return None
+        if np.linalg.cond(A) > 1e12:  # linearly dependent on the set: no new term
+            return None
+        safe = np.where(norms[k, cols] > 0, norms[k, cols], 1.0)
+        out[k] = c * norms[k, M1 - 1] / safe
+    return out
+
+
 class _Judge:
     """Fits a column set per speed and scores its pooled free-run error."""
 
@@ -66,21 +87,7 @@ class _Judge:
                        for g in groups]
 
     def coef(self, cols):
-        cols = list(cols)
-        K, M1 = self.norms.shape
-        out = np.zeros((K, len(cols)))
-        for k in range(K):
-            A = self.Gn[k][np.ix_(cols, cols)]
-            b = self.Gn[k][cols, M1 - 1]
-            try:
-                c = np.linalg.solve(A, b)
-            except np.linalg.LinAlgError:
-                return None
-            if np.linalg.cond(A) > 1e12:  # linearly dependent on the set: no new term
-                return None
-            safe = np.where(self.norms[k, cols] > 0, self.norms[k, cols], 1.0)
-            out[k] = c * self.norms[k, M1 - 1] / safe
-        return out
+        return ls_coef(self.Gn, self.norms, cols)
 
     def error(self, cols):
         """Pooled relative simulation error of ``cols``; ``inf`` when a run diverges."""
@@ -193,8 +200,7 @@ class _JointJudge:
     (items are ``(output, column)`` pairs)."""
 
     def __init__(self, groups, Gn, norms, exponents, ny, nu, n_outputs, bound):
-        self.singles = [_Judge([[] for _ in groups], Gn[c], norms[c], exponents, ny, nu, np.inf)
-                        for c in range(n_outputs)]
+        self.Gn, self.norms = Gn, norms  # per output: (K, M+1, M+1), (K, M+1)
         self.groups = groups  # per speed: list of (U, Y) records
         self.exponents = exponents
         self.ny, self.nu, self.p = ny, nu, n_outputs
@@ -210,8 +216,8 @@ class _JointJudge:
         cols = self.split(items)  # an output without terms simulates as zero
         if not items:
             return 1.0
-        coefs = [self.singles[o].coef(c) if c else np.zeros((len(self.groups), 0))
-                 for o, c in enumerate(cols)]
+        coefs = [ls_coef(self.Gn[o], self.norms[o], c) if c
+                 else np.zeros((len(self.groups), 0)) for o, c in enumerate(cols)]
         if any(c is None for c in coefs):
             return np.inf
         ex = self.exponents[[j for c in cols for j in c]]

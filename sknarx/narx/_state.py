@@ -7,6 +7,9 @@ which round-trips IEEE doubles exactly.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
@@ -104,3 +107,11 @@ def restore_state(model, doc: dict) -> None:
         np.full(raw.shape, np.nan) if raw_se is None else np.asarray(raw_se, dtype=float),
         index=names, columns=cols)
     model.output_scale_ = float(doc["output_scale"])
+
+
+def read_json_document(source) -> dict:
+    """A model document from JSON text or from the path of a JSON file."""
+    text = str(source)
+    if not text.lstrip().startswith("{"):
+        text = Path(source).read_text()
+    return json.loads(text)

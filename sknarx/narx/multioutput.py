@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import warnings
 from itertools import chain
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -33,10 +32,10 @@ from ._fit_paths import _Fit
 from ._joint_output_error import refine_joint_output_error
 from ._orthogonal import coef_covariance, compress
 from ._simulation_selection import select_joint_by_simulation
-from ._speed_functions import _spline, fit_speed_polynomials, set_speed_polynomials
-from ._state import check_document, model_state, restore_state
+from ._speed_functions import fit_speed_polynomials, set_speed_polynomials
+from ._state import model_state, read_json_document
 from .freerun import FreeRunDivergenceError, free_run_mimo
-from .scheduling import SpeedScheduledNarx, _process_structure
+from .scheduling import SpeedScheduledNarx
 from .selection import fit_efor
 from .terms import TermSet, monomial_exponents, term_names
 
@@ -448,24 +447,11 @@ class MultiOutputScheduledNarx(RegressorMixin, BaseEstimator):
     @classmethod
     def from_json(cls, source):
         """Rebuild a fitted model from :meth:`to_json` output (text or a path)."""
-        text = str(source)
-        if not text.lstrip().startswith("{"):
-            text = Path(source).read_text()
-        doc = json.loads(text)
+        doc = read_json_document(source)
         if doc.get("format") != FORMAT:
             raise ValueError(f"Not a {FORMAT} document (format {doc.get('format')!r}).")
         model = cls(**doc["params"])
-        model.estimators_ = []
-        for sub_doc in doc["outputs"]:
-            check_document(sub_doc)
-            sub = SpeedScheduledNarx(**sub_doc["params"])
-            restore_state(sub, sub_doc)
-            sub.exponents_, sub.ny_, sub.nu_ = _process_structure(sub.selected_terms_)
-            sub.coef_degree_ = sub.speed_polynomials_.shape[1] - 1
-            sub.coef_spline_ = None
-            if sub.speed_basis == "spline" and sub.speeds_ is not None:
-                sub.coef_spline_ = _spline(sub.speeds_, sub.coef_per_speed_.to_numpy())
-            model.estimators_.append(sub)
+        model.estimators_ = [SpeedScheduledNarx._from_document(d) for d in doc["outputs"]]
         model.n_outputs_, model.n_inputs_ = int(doc["n_outputs"]), int(doc["n_inputs"])
         model._set_layout()
         return model

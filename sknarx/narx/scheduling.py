@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import warnings
 from numbers import Integral, Real
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -28,7 +27,7 @@ from ._speed_functions import (
     refine_speed_functions_of,
 )
 from ._speed_map import raw_power_map, speed_weights
-from ._state import check_document, model_state, restore_state
+from ._state import check_document, model_state, read_json_document, restore_state
 from .freerun import FreeRunDivergenceError, free_run
 from .selection import warn_conditioning
 from .sweep_data import read_sample_table
@@ -676,10 +675,11 @@ class SpeedScheduledNarx(RegressorMixin, BaseEstimator):
     @classmethod
     def from_json(cls, source):
         """Rebuild a fitted model from :meth:`to_json` output (JSON text or a path)."""
-        text = str(source)
-        if not text.lstrip().startswith("{"):
-            text = Path(source).read_text()
-        doc = json.loads(text)
+        return cls._from_document(read_json_document(source))
+
+    @classmethod
+    def _from_document(cls, doc):
+        """The fitted model of one document (also one output of a multi-output model)."""
         check_document(doc)
         model = cls(**doc["params"])
         restore_state(model, doc)
