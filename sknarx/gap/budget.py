@@ -5,7 +5,11 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from numbers import Integral, Real
 
-from sklearn.utils._param_validation import Interval, validate_parameter_constraints
+from sklearn.utils._param_validation import (
+    Interval,
+    StrOptions,
+    validate_parameter_constraints,
+)
 
 __all__ = ["SearchBudget"]
 
@@ -57,6 +61,11 @@ class SearchBudget:
     step_factor : float, default=2.5
         Integration step of every simulation, ``h |lambda|max <= step_factor`` (RK4 is
         stable to about 2.8).
+    solver : {"harmonic-balance", "integrate"}, default="harmonic-balance"
+        How a settled record is computed: its shaft-periodic steady state solved
+        directly where the rotor and its effects have one
+        (:mod:`sknarx.rotor.steady`; the others integrated), or every record
+        integrated through ``settle_s`` (``warm_lead_s`` in a local run).
     reading_contenders : int, default=2
         Best singles fitted again in each alternative reading of the rotor.
     n_bootstrap : int, default=200
@@ -90,6 +99,7 @@ class SearchBudget:
     warm_lead_s: float | None = 0.3
     settle_s: float = 2.0
     step_factor: float = 2.5
+    solver: str = "harmonic-balance"
     reading_contenders: int = 2
     n_bootstrap: int = 200
     random_state: int = 0
@@ -109,6 +119,7 @@ class SearchBudget:
         "warm_lead_s": [Interval(Real, 0, None, closed="left"), None],
         "settle_s": [Interval(Real, 0, None, closed="left")],
         "step_factor": [Interval(Real, 0, 2.8, closed="right")],
+        "solver": [StrOptions({"harmonic-balance", "integrate"})],
         "reading_contenders": [Interval(Integral, 0, None, closed="left")],
         "n_bootstrap": [Interval(Integral, 20, None, closed="left")],
         "random_state": [Interval(Integral, 0, None, closed="left")],

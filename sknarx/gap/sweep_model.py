@@ -1,14 +1,19 @@
 """How the measured experiment is simulated: speeds, sampling, channels, windows.
 
 :class:`SweepModel` runs the nonlinear simulator at every speed step of a sweep and
-takes the same order features as the measurement's. The speeds of one evaluation run
-on threads (the compiled integrator releases the GIL); several parameter points share
-the threads' queue.
+takes the same order features as the measurement's. A settled record of a rotor whose
+response is locked to the shaft revolution is solved for directly by harmonic balance
+(:mod:`sknarx.rotor.steady`, each speed started from its last solution); any other
+record -- one that starts from rest, an effect that can make a sub-synchronous or
+aperiodic orbit, a balance that does not converge -- is integrated. The speeds of one
+evaluation run on threads (the compiled kernels release the GIL); several parameter
+points share the threads' queue.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -19,6 +24,13 @@ from joblib import cpu_count
 from .._progress import evaluated
 from ..orders import record_features, stack_features
 from ..rotor import RotorBearingSimulator, RotorParameters
+from ..rotor.steady import (
+    HarmonicBalanceError,
+    SteadyState,
+    solve_steady_state,
+    steady_columns,
+    supports_harmonic_balance,
+)
 
 __all__ = ["NUISANCE", "NUISANCE_UNITS", "SweepModel"]
 
@@ -31,6 +43,8 @@ NUISANCE = {
 }
 NUISANCE_UNITS = {"unbalance_scale": "-", "unbalance_phase": "rad", "stiffness_scale": "-",
                   "damping_scale": "-"}
+
+logger = logging.getLogger(__name__)
 
 _POOLS: dict = {}
 
@@ -57,13 +71,17 @@ class SweepModel:
     seed: int = 0
     settle_s: float = 0.0  # simulated and discarded before each record (0: from rest)
     # speed (rad/s) -> (q, v): each speed's run continues a settled run from ``lead_s``
-    # before its record instead of settling from rest (see ``warmed``; None: never)
+    # before its record instead of settling from rest; or -> SteadyState: each speed's
+    # balance starts from it (see ``warmed``; None: never)
     warm: dict | None = None
     lead_s: float | None = 0.3
     # the integration step: h |lambda|max <= step_factor (see RotorBearingSimulator)
     step_factor: float = 2.0
     # threads the speed steps run on (None: one per CPU this process may use)
     threads: int | None = None
+    # how a settled record is computed: "harmonic-balance" where the rotor allows it
+    # (else integrated), or "integrate" always
+    solver: str = "harmonic-balance"
 
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis
@@ -82,12 +100,25 @@ class SweepModel:
         steady state and the short lead lets the small difference decay (the slow
         modes are the least excited ones). Every run of one warmed model starts from
         the same states, so its residual is a smooth function of the parameters.
+        Where the records are balanced, not integrated, the balance at each speed
+        starts from the start point's solution there instead (two Newton iterations
+        rather than five), and every evaluation from the same one, so that its result
+        does not depend on the order the threads take the points in.
         Records that start with a transient (``settle_s`` 0) are not warmed: their
         start from rest is part of what is compared.
         """
         if self.lead_s is None or self.settle_s <= self.lead_s:
             return self
         sim = self._simulator(nuis, effects, speeds)
+        if self._balances(sim):
+            def solved(w):
+                try:
+                    return float(w), solve_steady_state(sim, float(w), keep_jacobian=True)
+                except HarmonicBalanceError:
+                    return float(w), None
+
+            return dataclasses.replace(self, warm=dict(_pool(self.threads).map(solved,
+                                                                                speeds)))
 
         def one(w):
             return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
@@ -95,14 +126,31 @@ class SweepModel:
 
         return dataclasses.replace(self, warm=dict(_pool(self.threads).map(one, speeds)))
 
+    def _balances(self, sim) -> bool:
+        """Whether the settled records of ``sim`` are solved by harmonic balance."""
+        return (self.solver == "harmonic-balance" and self.settle_s > 0
+                and supports_harmonic_balance(sim))
+
     def _simulator(self, nuis, effects, speeds):
         sim = RotorBearingSimulator(self.params(nuis), effects=effects, seed=self.seed,
                                     step_factor=self.step_factor)
         # build once, before the threads share it: the setup and each speed's step
         _ = sim._setup
-        for w in speeds:
-            sim.substeps(self.fs, float(w))
+        if not self._balances(sim):
+            for w in speeds:
+                sim.substeps(self.fs, float(w))
         return sim
+
+    def _balanced_record(self, sim, w, start):
+        """The settled record at ``w`` by harmonic balance from ``start`` (a
+        SteadyState or None), or None where the balance fails (the caller integrates)."""
+        try:
+            state = solve_steady_state(
+                sim, w, start=start if isinstance(start, SteadyState) else None)
+        except HarmonicBalanceError as exc:
+            logger.debug("%s; integrated instead", exc)
+            return None
+        return steady_columns(sim, state, self.fs, self.n_samples)
 
     def records(self, speeds, nuis, effects=()):
         """Simulated records at ``speeds``; the speeds run concurrently (the integrator
@@ -135,11 +183,16 @@ class SweepModel:
             if isinstance(sim, Exception):
                 return sim
             try:
-                # automatic step: halved if an effect's stiff contact makes it unstable
                 state = warm.get(w)
-                run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
-                                           settle=self.settle_s if state is None
-                                           else self.lead_s, state=state)
+                run = (self._balanced_record(sim, w, state) if self._balances(sim)
+                       else None)
+                if run is None:
+                    if not isinstance(state, tuple):  # a balance's start, no (q, v)
+                        state = None
+                    # automatic step: halved if an effect's stiff contact makes it unstable
+                    run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
+                                               settle=self.settle_s if state is None
+                                               else self.lead_s, state=state)
                 Y = np.column_stack([run[c] for c in self.channels])
                 evaluated()
                 return then((w, run["t"], Y))

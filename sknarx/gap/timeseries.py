@@ -101,7 +101,7 @@ def _update_nominal(meas, train, channels, base, info, transient_s, settle_s, bu
         max_nfev=budget.update_max_nfev, remove_constant=True,
         nonlinear_kwargs={"fs": info["fs"], "n_samples": info["n_samples"] - skip,
                           "settle": settle_s + transient_s,
-                          "step_factor": budget.step_factor})
+                          "step_factor": budget.step_factor, "solver": budget.solver})
 
 
 def _in_phase(desc, compute):
@@ -325,7 +325,7 @@ class _Run:
         self.model = SweepModel(base=base, fs=info["fs"], n_samples=info["n_samples"],
                                 channels=tuple(self.channels), transient_s=self.transient_s,
                                 settle_s=self.settle_s, lead_s=budget.warm_lead_s,
-                                step_factor=budget.step_factor)
+                                step_factor=budget.step_factor, solver=budget.solver)
         self.nominal_all = self.kept.step(
             "features", [self.model, self.speeds, NUISANCE_START],
             _in_phase("the updated rotor at every speed",

@@ -48,6 +48,7 @@ from ..orders import harmonic_basis
 from ..rotor.matrices import DOF_INDEX
 from ..rotor.parameters import RotorParameters
 from ..rotor.simulator import RotorBearingSimulator
+from ..rotor.steady import HarmonicBalanceError, solve_steady_state, steady_columns
 from .sweep_model import _pool
 
 __all__ = ["UpdatingParameter", "DEFAULT_PARAMETERS", "linear_1x", "nonlinear_1x",
@@ -169,19 +170,28 @@ def linear_1x(params: RotorParameters, speeds, channels) -> np.ndarray:
 
 def nonlinear_1x(params: RotorParameters, speeds, channels, fs: float = 2000.0,
                  n_samples: int = 2048, settle: float = 2.0,
-                 step_factor: float = 2.0) -> np.ndarray:
+                 step_factor: float = 2.0, solver: str = "harmonic-balance") -> np.ndarray:
     """Steady 1x vectors (m, complex) of the nonlinear simulation, order-tracked.
 
-    Each speed is simulated for ``settle`` seconds, then ``n_samples`` at ``fs`` are
-    fitted with a constant and orders 1-5 (least squares on the shaft angle), with the
-    simulator's integration ``step_factor``. Same shape and convention as
-    :func:`linear_1x`.
+    Each speed's settled record of ``n_samples`` at ``fs`` -- its steady state by
+    harmonic balance (``solver``, :mod:`sknarx.rotor.steady`), or integrated after
+    ``settle`` seconds with the simulator's ``step_factor`` (``solver="integrate"``,
+    or where the balance fails) -- is fitted with a constant and orders 1-5 (least
+    squares on the shaft angle). Same shape and convention as :func:`linear_1x`.
     """
     sim = RotorBearingSimulator(params, step_factor=step_factor)
     _ = sim._setup  # built once, before the threads share it
 
+    def record(w):
+        if solver == "harmonic-balance" and settle > 0:
+            try:
+                return steady_columns(sim, solve_steady_state(sim, w), fs, n_samples)
+            except HarmonicBalanceError:
+                pass
+        return sim.simulate_columns(w, fs=fs, n_samples=n_samples, settle=settle)
+
     def one(w):
-        run = sim.simulate_columns(float(w), fs=fs, n_samples=n_samples, settle=settle)
+        run = record(float(w))
         B = harmonic_basis(run["phi"], (1.0, 2.0, 3.0, 4.0, 5.0))
         Y = np.column_stack([run[c] for c in channels])
         coef, *_ = np.linalg.lstsq(B, Y, rcond=None)

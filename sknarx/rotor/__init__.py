@@ -1,4 +1,5 @@
-"""The physics simulator: parameters, model matrices, bearings, integrator, effects."""
+"""The physics simulator: parameters, model matrices, bearings, integrator, effects,
+and the steady state by harmonic balance."""
 
 from .effects import (
     EFFECTS,
@@ -19,11 +20,15 @@ from .matrices import RotorMatrices, assemble
 from .parameters import DOF_NAMES, RotorParameters
 from .pedestals import HOUSING_NAMES, Pedestals
 from .simulator import RotorBearingSimulator, SimulationDivergenceError
+from .steady import HarmonicBalanceError, SteadyState, solve_steady_state
 from .sweep_table import load_sweep, save_sweep
 
 __all__ = [
     "RotorBearingSimulator",
     "SimulationDivergenceError",
+    "SteadyState",
+    "HarmonicBalanceError",
+    "solve_steady_state",
     "RotorParameters",
     "DOF_NAMES",
     "HOUSING_NAMES",

@@ -80,6 +80,12 @@ class Effect:
     #: :class:`Effect` class, or None): what that form explains as well is model error,
     #: not this effect (see :meth:`linear_form_of`)
     linear_form = None
+    #: whether the settled response stays locked to the shaft revolution whatever the
+    #: parameters (harmonic balance may solve it, :mod:`sknarx.rotor.steady`); False for
+    #: an effect that can make it sub-synchronous, quasi-periodic or chaotic (a contact,
+    #: an impact, a fluctuating speed): its settled records are integrated, unless it
+    #: acts through a force alone and that force is nil along the balanced orbit
+    shaft_periodic = True
 
     def linear_form_of(self):
         """This effect's nearest instance of :attr:`linear_form` (None without one)."""
@@ -224,6 +230,7 @@ class Rub(Effect):
     offset_y: float = 0.0
     at: str = "O1"
     name = "rub"
+    shaft_periodic = False  # a rub can make 1/2x, 1/3x and chaos (Muszynska 2005)
     bounds = {"clearance": (1e-4, 2e-3, "log"), "stiffness": (1e5, 1e8, "log"),
               "friction": (0.0, 0.3, "lin"), "offset_x": (-1e-3, 1e-3, "lin"),
               "offset_y": (-1e-3, 1e-3, "lin")}
@@ -560,6 +567,7 @@ class JointLooseness(Effect):
     residual: float = 0.1
     gap: float = 0.0
     name = "looseness"
+    shaft_periodic = False  # a loose joint opens and closes: 1/2x (Goldman & Muszynska)
     bounds = {"residual": (1e-4, 1.0, "log"), "gap": (0.0, 2e-5, "lin")}
     units = {"residual": "- (joint stiffness left)", "gap": "m"}
     signature = "shift of the response peak, harmonics and subharmonics from bilinear contact"
@@ -793,6 +801,7 @@ class ClearanceChange(Effect):
     clearance: float = 5e-6
     contact_scale: float = 1.0
     name = "clearance"
+    shaft_periodic = False  # a clearance bearing bifurcates to 1/2x and chaos (Tiwari 2000)
     bounds = {"clearance": (5e-7, 5e-5, "log"), "contact_scale": (0.5, 2.0, "log")}
     units = {"clearance": "m", "contact_scale": "- (of the model's contact stiffness)"}
     start = {"contact_scale": 1.0}
@@ -837,6 +846,7 @@ class SpeedFluctuation(Effect):
     frequency: float = 1.0
     phase: float = 0.0
     name = "speed-fluctuation"
+    shaft_periodic = False  # the speed itself is not constant
     bounds = {"amplitude": (0.0, 0.05, "lin"), "frequency": (0.2, 20.0, "log"),
               "phase": (-math.pi, math.pi, "lin")}
     start = {"phase": 0.0}

@@ -19,6 +19,7 @@ from .linear import LinearRotorModel, bearing_stiffness
 from .matrices import DOF_INDEX, assemble
 from .parameters import DOF_NAMES, RotorParameters
 from .pedestals import HOUSING_NAMES, bearing_dofs, with_pedestals
+from .steady import solve_steady_state
 from .sweep_table import SweepStore
 
 __all__ = ["RotorBearingSimulator", "SimulationDivergenceError"]
@@ -208,6 +209,12 @@ class RotorBearingSimulator:
         kernel, kparams = compose_force_kernels(kernels)
         return _Setup(minv=1.0 / np.diag(m.M), C=m.C, G=m.G, K=m.K, fg=m.gravity_force, unb=unb,
                       brg=brg, kernel=kernel, kparams=kparams, context=ctx)
+
+    @cached_property
+    def linear_stiffness(self) -> np.ndarray:
+        """Stiffness matrix (N/m, N m/rad) of the rotor with its bearings linearised
+        about the static equilibrium (:meth:`linear_model`'s ``K``), built once."""
+        return self.linear_model().K
 
     def linear_model(self) -> LinearRotorModel:
         """The rotor with its bearings linearised about the static equilibrium."""
@@ -487,6 +494,42 @@ class RotorBearingSimulator:
         # the nominal speed, not the fluctuating one the integrator saw
         columns["speed"] = np.full(columns["t"].size, omega)
         return self._measure(columns, omega, int(n_samples))
+
+    def steady_state(self, omega, harmonics=8, start=None):
+        """The settled shaft-periodic response at ``omega`` rad/s by harmonic balance.
+
+        Solved directly instead of integrated to (see :mod:`sknarx.rotor.steady`: what
+        it leaves out, and which effects it declines); raises
+        :class:`~sknarx.rotor.steady.HarmonicBalanceError` where it does not converge
+        or an effect may make the orbit sub-synchronous.
+
+        Parameters
+        ----------
+        omega : float
+            Speed, rad/s.
+        harmonics : int, default=8
+            Highest shaft order held.
+        start : SteadyState, optional
+            A nearby solution to start from.
+
+        Returns
+        -------
+        SteadyState
+            Fourier coefficients per DOF (m, rad), :meth:`SteadyState.order_vector`,
+            :meth:`SteadyState.displacements` at any instants.
+
+        Examples
+        --------
+        >>> from sknarx.rotor import RotorBearingSimulator
+        >>> sim = RotorBearingSimulator()
+        >>> state = sim.steady_state(150.0)
+        >>> run = sim.simulate_columns(150.0, n_samples=1000, settle=2.0)
+        >>> x = state.displacements(run["t"])[:, state.dof_names.index("xO1")]
+        >>> bool(abs(x - run["xO1"]).max() < 0.01 * abs(run["xO1"]).max())
+        True
+        """
+        return solve_steady_state(self, float(self._check_speeds(omega)[0]),
+                                  harmonics=harmonics, start=start)
 
     def run_up(self, omega, fs=1000.0, duration=None, settle=1.0, substeps=None):
         """Run with a speed profile (run-up or coast-down).
