@@ -101,26 +101,28 @@ class SweepModel:
         modes are the least excited ones). Every run of one warmed model starts from
         the same states, so its residual is a smooth function of the parameters.
         Where the records are balanced, not integrated, the balance at each speed
-        starts from the start point's solution there instead (two Newton iterations
-        rather than five), and every evaluation from the same one, so that its result
-        does not depend on the order the threads take the points in.
+        starts from the start point's solution there instead (two or three chord steps
+        rather than five Newton iterations), and every evaluation from the same one, so
+        that its result does not depend on the order the threads take the points in; an
+        evaluation whose balance fails is integrated over ``lead_s`` from the start's
+        orbit, and a speed where the start's own balance fails (a contact acts) keeps
+        the start's settled run.
         Records that start with a transient (``settle_s`` 0) are not warmed: their
         start from rest is part of what is compared.
         """
         if self.lead_s is None or self.settle_s <= self.lead_s:
             return self
         sim = self._simulator(nuis, effects, speeds)
-        if self._balances(sim):
-            def solved(w):
+        balances = self._balances(sim)
+
+        def one(w):
+            # the start's balanced orbit; where it has none (a contact acts), its
+            # settled run from ``lead_s`` before the record
+            if balances:
                 try:
                     return float(w), solve_steady_state(sim, float(w), keep_jacobian=True)
                 except HarmonicBalanceError:
-                    return float(w), None
-
-            return dataclasses.replace(self, warm=dict(_pool(self.threads).map(solved,
-                                                                                speeds)))
-
-        def one(w):
+                    sim.substeps(self.fs, float(w))
             return float(w), sim.warm_state(float(w), fs=self.fs, settle=self.settle_s,
                                             lead=self.lead_s)
 
@@ -143,10 +145,13 @@ class SweepModel:
 
     def _balanced_record(self, sim, w, start):
         """The settled record at ``w`` by harmonic balance from ``start`` (a
-        SteadyState or None), or None where the balance fails (the caller integrates)."""
+        SteadyState or None), or None where the balance fails or the start's own did
+        (a warm ``(q, v)``: a contact acted there) -- the caller integrates."""
+        if isinstance(start, tuple):
+            return None
         try:
-            state = solve_steady_state(
-                sim, w, start=start if isinstance(start, SteadyState) else None)
+            state = solve_steady_state(sim, w, start=start,
+                                       max_iter=10 if start is not None else 25)
         except HarmonicBalanceError as exc:
             logger.debug("%s; integrated instead", exc)
             return None
@@ -187,8 +192,8 @@ class SweepModel:
                 run = (self._balanced_record(sim, w, state) if self._balances(sim)
                        else None)
                 if run is None:
-                    if not isinstance(state, tuple):  # a balance's start, no (q, v)
-                        state = None
+                    if isinstance(state, SteadyState):  # on the start's orbit
+                        state = state.state_at(-self.lead_s)
                     # automatic step: halved if an effect's stiff contact makes it unstable
                     run = sim.simulate_columns(w, fs=self.fs, n_samples=self.n_samples,
                                                settle=self.settle_s if state is None

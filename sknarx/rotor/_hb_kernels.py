@@ -18,6 +18,10 @@ from numba import njit
 from .bearings import ball_pitch, bearing_force_at
 from .effects import builtin_forces
 
+#: a chord step (a nearby solution's Jacobian) is kept while it cuts the imbalance at
+#: least this much; slower, Newton's steps (quadratic) take over
+CHORD_RATE = 0.1
+
 
 @njit(nogil=True, cache=True)
 def basis(nu, H, N):  # pragma: no cover
@@ -266,29 +270,93 @@ def active_dofs(A, B):  # pragma: no cover
     return np.nonzero(on)[0]
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _products(c, sn, k, l):  # pragma: no cover
+    """``(1/N) sum_j x_j f_k g_l`` for the four products of cos/sin of orders ``k``,
+    ``l`` from the sums ``c[q] = (1/N) sum_j x_j cos(q theta_j)`` and ``sn`` (sin):
+    (cos cos, cos sin, sin cos, sin sin)."""
+    d = abs(k - l)
+    sg = 1.0 if k >= l else -1.0
+    cc = 0.5 * (c[d] + c[k + l])
+    ss = 0.5 * (c[d] - c[k + l])
+    cs = 0.5 * (sn[k + l] - sg * sn[d])
+    sc = 0.5 * (sn[k + l] + sg * sn[d])
+    return cc, cs, sc, ss
+
+
 @njit(nogil=True, cache=True)
 def coupling(act, A, B, E, D, W):  # pragma: no cover
     """``Ga``: the harmonics of the force tangents between the active DOFs ``act``
     (layout ``a * m + p``), the part of the balance's Jacobian beyond the linear
-    rotor's (``J = L - U Ga U^T``)."""
+    rotor's (``J = L - U Ga U^T``).
+
+    Each block is the Galerkin product ``W_p sum_j e_p (a_j e_r + b_j d_r)``, written
+    through the tangents' own harmonics up to order ``2H`` (products of two orders
+    up to ``H``): exact on the ``N > 4H`` instants, and a tenth of the direct sum's
+    work.
+    """
     N, m = E.shape
+    H = (m - 1) // 2
+    nu = D[0, 2] if H > 0 else 0.0  # d/dt sin(nu t) at t = 0
     na = act.shape[0]
     G = np.zeros((na * m, na * m))
-    g = np.empty(m)
+    ca = np.empty(2 * H + 1)
+    sa = np.empty(2 * H + 1)
+    cb = np.empty(2 * H + 1)
+    sb = np.empty(2 * H + 1)
+    ct = np.empty((N, 2 * H + 1))
+    st = np.empty((N, 2 * H + 1))
+    for j in range(N):
+        th = 2.0 * math.pi * j / N
+        for q in range(2 * H + 1):
+            ct[j, q] = math.cos(q * th)
+            st[j, q] = math.sin(q * th)
     for ai in range(na):
         i = act[ai]
         for al in range(na):
             l = act[al]
+            nonzero = False
+            for j in range(N):
+                if A[j, i, l] != 0.0 or B[j, i, l] != 0.0:
+                    nonzero = True
+                    break
+            if not nonzero:
+                continue
+            for q in range(2 * H + 1):
+                ca[q] = 0.0
+                sa[q] = 0.0
+                cb[q] = 0.0
+                sb[q] = 0.0
             for j in range(N):
                 a, b = A[j, i, l], B[j, i, l]
-                if a == 0.0 and b == 0.0:
-                    continue
-                for r in range(m):
-                    g[r] = a * E[j, r] + b * D[j, r]
-                for p in range(m):
-                    wp = W[p] * E[j, p]
-                    for r in range(m):
-                        G[ai * m + p, al * m + r] += wp * g[r]
+                for q in range(2 * H + 1):
+                    ca[q] += a * ct[j, q]
+                    sa[q] += a * st[j, q]
+                    cb[q] += b * ct[j, q]
+                    sb[q] += b * st[j, q]
+            for q in range(2 * H + 1):
+                ca[q] /= N
+                sa[q] /= N
+                cb[q] /= N
+                sb[q] /= N
+            row0, col0 = ai * m, al * m
+            for k in range(H + 1):
+                for ll in range(H + 1):
+                    acc_, acs, asc, ass = _products(ca, sa, k, ll)
+                    bcc, bcs, bsc, bss = _products(cb, sb, k, ll)
+                    w = ll * nu
+                    # rows: cos k (p = 2k - 1, or 0 for k = 0), sin k (p = 2k)
+                    # columns: cos l (r = 2l - 1 or 0): a cos l - b l nu sin l
+                    #          sin l (r = 2l):          a sin l + b l nu cos l
+                    pc = 0 if k == 0 else 2 * k - 1
+                    rc = 0 if ll == 0 else 2 * ll - 1
+                    G[row0 + pc, col0 + rc] += W[pc] * N * (acc_ - w * bcs)
+                    if ll > 0:
+                        G[row0 + pc, col0 + 2 * ll] += W[pc] * N * (acs + w * bcc)
+                    if k > 0:
+                        G[row0 + 2 * k, col0 + rc] += W[2 * k] * N * (asc - w * bss)
+                        if ll > 0:
+                            G[row0 + 2 * k, col0 + 2 * ll] += W[2 * k] * N * (ass + w * bsc)
     return G
 
 
@@ -367,9 +435,9 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
           n_cage, Kb, scale, tol, max_iter, keep):  # pragma: no cover
     """The balance ``R(z) = 0`` from ``z0`` (``K`` the rotor's stiffness with the
     bearings' ``Kb``, which the forces take back): chord steps with a nearby solution's
-    Jacobian (``act0``, ``G0``, ``Minv0``; empty: none) while each at least halves the
-    imbalance, then Newton's method, its step halved while it does not reduce the
-    imbalance.
+    Jacobian (``act0``, ``G0``, ``Minv0``; empty: none) while each cuts the imbalance
+    to ``CHORD_RATE`` of what it was, then Newton's method, its step halved while it
+    does not reduce the imbalance.
 
     Returns ``(z, act, G, Minv, iterations, imbalance, status)``: with ``keep``, the
     condensed Jacobian at the solution (for a later balance's chord steps); ``status``
@@ -398,7 +466,7 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
             new = _imbalance(trial, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg,
                              eparams, n_cage, Kb, False, Q, V, F, A, B, R, scale)
             it += 1
-            if not new < 0.5 * res:
+            if not new < CHORD_RATE * res:
                 res = _imbalance(z, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg,
                                  eparams, n_cage, Kb, False, Q, V, F, A, B, R, scale)
                 break
