@@ -220,3 +220,22 @@ def test_the_budget_names_the_solver():
     assert SearchBudget().solver == "harmonic-balance"
     with pytest.raises(ValueError, match="solver"):
         SearchBudget(solver="shooting")
+
+
+def test_a_rub_the_orbit_nearly_reaches_is_not_balanced():
+    """``IDLE_MARGIN``: a stator 2 % beyond the orbit's largest excursion is too close
+    to call the contact idle (the ball passage and a record's residual decay move the
+    orbit); 10 % beyond it is idle."""
+    w = 200.0
+    bare = R.RotorBearingSimulator()
+    state = solve_steady_state(bare, w)
+    i, j = state.dof_names.index("xO1"), state.dof_names.index("yO1")
+    t = np.linspace(0.0, 2 * np.pi / w, 2000)
+    q = state.displacements(t)
+    q0 = bare.static_equilibrium()
+    reach = np.max(np.hypot(q[:, i] - q0[i], q[:, j] - q0[j]))
+    near = R.RotorBearingSimulator(effects=[R.Rub(clearance=1.02 * reach)])
+    with pytest.raises(HarmonicBalanceError, match="acts on"):
+        solve_steady_state(near, w)
+    far = R.RotorBearingSimulator(effects=[R.Rub(clearance=1.10 * reach)])
+    assert np.array_equal(solve_steady_state(far, w).coefficients, state.coefficients)
