@@ -49,16 +49,23 @@ phases, last = {}, t
 for msg, at in marks:
     phases[msg] = at - last
     last = at
+import pathlib, sknarx
 print(json.dumps({"seconds": total, "verdict": d["verdict"], "shrink": d["shrink"],
-                  "phases_s": phases}, default=str))
+                  "phases_s": phases,
+                  "package": str(pathlib.Path(sknarx.__file__).resolve().parents[1])},
+                 default=str))
 """
 
 
 def run_in(checkout, sweep_path) -> dict:
     """Diagnose the pickled sweep with the package of ``checkout`` in a new process."""
     env = dict(os.environ, PYTHONPATH=str(checkout), OPENBLAS_NUM_THREADS="1")
+    # run in the checkout: ``python -c`` puts the working directory first on the path,
+    # ahead of PYTHONPATH, so a run started elsewhere would import that folder's package
     out = subprocess.run([sys.executable, "-c", RUNNER, str(sweep_path)], env=env,
-                         capture_output=True, text=True, check=True)
+                         cwd=str(checkout), capture_output=True, text=True, check=True)
+    if f'"package": "{Path(checkout).resolve()}' not in out.stdout:
+        raise RuntimeError(f"the run imported another sknarx than {checkout}: {out.stdout}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
