@@ -217,7 +217,8 @@ def test_balanced_features_are_reproducible_whatever_the_start():
 
 
 def test_the_budget_names_the_solver():
-    assert SearchBudget().solver == "harmonic-balance"
+    assert SearchBudget().solver == "integrate"
+    assert SearchBudget(solver="harmonic-balance").solver == "harmonic-balance"
     with pytest.raises(ValueError, match="solver"):
         SearchBudget(solver="shooting")
 

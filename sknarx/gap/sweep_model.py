@@ -1,13 +1,13 @@
 """How the measured experiment is simulated: speeds, sampling, channels, windows.
 
 :class:`SweepModel` runs the nonlinear simulator at every speed step of a sweep and
-takes the same order features as the measurement's. A settled record of a rotor whose
-response is locked to the shaft revolution is solved for directly by harmonic balance
-(:mod:`sknarx.rotor.steady`, each speed started from its last solution); any other
-record -- one that starts from rest, an effect that can make a sub-synchronous or
-aperiodic orbit, a balance that does not converge -- is integrated. The speeds of one
-evaluation run on threads (the compiled kernels release the GIL); several parameter
-points share the threads' queue.
+takes the same order features as the measurement's. With ``solver="harmonic-balance"``
+a settled record of a rotor whose response is locked to the shaft revolution is solved
+for directly (:mod:`sknarx.rotor.steady`, each speed started from the local search's
+start); any other record -- one that starts from rest, an effect that can make a
+sub-synchronous or aperiodic orbit, a balance that does not converge -- is integrated.
+The speeds of one evaluation run on threads (the compiled kernels release the GIL);
+several parameter points share the threads' queue.
 """
 
 from __future__ import annotations
@@ -79,9 +79,9 @@ class SweepModel:
     step_factor: float = 2.0
     # threads the speed steps run on (None: one per CPU this process may use)
     threads: int | None = None
-    # how a settled record is computed: "harmonic-balance" where the rotor allows it
-    # (else integrated), or "integrate" always
-    solver: str = "harmonic-balance"
+    # how a settled record is computed: "integrate" always, or "harmonic-balance"
+    # where the rotor allows it (else integrated)
+    solver: str = "integrate"
 
     def params(self, nuis) -> RotorParameters:
         su, ph, sk, sc = nuis

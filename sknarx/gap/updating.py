@@ -170,14 +170,15 @@ def linear_1x(params: RotorParameters, speeds, channels) -> np.ndarray:
 
 def nonlinear_1x(params: RotorParameters, speeds, channels, fs: float = 2000.0,
                  n_samples: int = 2048, settle: float = 2.0,
-                 step_factor: float = 2.0, solver: str = "harmonic-balance") -> np.ndarray:
+                 step_factor: float = 2.0, solver: str = "integrate") -> np.ndarray:
     """Steady 1x vectors (m, complex) of the nonlinear simulation, order-tracked.
 
-    Each speed's settled record of ``n_samples`` at ``fs`` -- its steady state by
-    harmonic balance (``solver``, :mod:`sknarx.rotor.steady`), or integrated after
-    ``settle`` seconds with the simulator's ``step_factor`` (``solver="integrate"``,
-    or where the balance fails) -- is fitted with a constant and orders 1-5 (least
-    squares on the shaft angle). Same shape and convention as :func:`linear_1x`.
+    Each speed's settled record of ``n_samples`` at ``fs`` -- integrated after
+    ``settle`` seconds with the simulator's ``step_factor``, or with
+    ``solver="harmonic-balance"`` its steady state by harmonic balance
+    (:mod:`sknarx.rotor.steady`; integrated where the balance fails) -- is fitted
+    with a constant and orders 1-5 (least squares on the shaft angle). Same shape and
+    convention as :func:`linear_1x`.
     """
     sim = RotorBearingSimulator(params, step_factor=step_factor)
     _ = sim._setup  # built once, before the threads share it
