@@ -66,9 +66,8 @@ class SearchBudget:
         (``warm_lead_s`` in a local run), or its shaft-periodic steady state solved
         directly where the rotor and its effects have one (:mod:`sknarx.rotor.steady`;
         the others integrated). The balance makes a diagnosis about 1.5 times faster
-        but does not yet give the integrator's verdicts everywhere (on an effect-free
-        sweep of the second plant family it raises the gap before from 0.09 to 0.23
-        per feature, a false alarm), so it is not the default.
+        but does not yet give the integrator's verdicts on every sweep it was checked
+        on (``docs/decisions.md``), so it is not the default.
     reading_contenders : int, default=2
         Best singles fitted again in each alternative reading of the rotor.
     n_bootstrap : int, default=200
