@@ -103,6 +103,12 @@ def test_the_datasets_command_lists_the_shipped_data_and_prints_their_paths(caps
 
 
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def _default_sigint():
+    """Ctrl-C reaches the child as at a terminal: a test worker may ignore SIGINT (some
+    libraries set that), and a Python started with SIGINT ignored keeps ignoring it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_a_second_ctrl_c_while_the_workers_wind_down_prints_no_traceback(tmp_path):
     """Ctrl-C twice in quick succession during a diagnosis: one line saying it stopped
     and how to resume, exit 130, no traceback from the threads winding down."""
@@ -116,7 +122,8 @@ def test_a_second_ctrl_c_while_the_workers_wind_down_prints_no_traceback(tmp_pat
     measured.to_csv(path, index=False)
     proc = subprocess.Popen([sys.executable, "-m", "sknarx", "gap", "--measured", str(path),
                              "--out", str(tmp_path / "out"), "--candidates", "runout"],
-                            stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
     deadline = time.monotonic() + 300
     # the speed steps run on worker threads from the nominal update on
     while not list((tmp_path / "out" / cli.CHECKPOINT_DIR).glob("*.pkl")):

@@ -73,7 +73,10 @@ def test_gap_command_writes_diagnosis(runout_trial, tmp_path):
     command = [sys.executable, "-m", "sknarx", "gap", "--measured", str(path),
                "--out", str(tmp_path / "out"), "--candidates", "runout", "clearance"]
     kept = tmp_path / "out" / ".checkpoint"
-    first = subprocess.Popen(command + ["--quiet"], stderr=subprocess.PIPE, text=True)
+    # Ctrl-C as at a terminal: a test worker may ignore SIGINT, and a Python started
+    # with SIGINT ignored keeps ignoring it
+    first = subprocess.Popen(command + ["--quiet"], stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 600
     while len(list(kept.glob("update-*.pkl"))) < 1 and first.poll() is None:
         assert time.monotonic() < deadline, "no checkpoint step written"
