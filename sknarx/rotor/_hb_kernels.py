@@ -79,6 +79,20 @@ def _bearing_mean(x, y, kB, gamma, expo, nb, n_cage, cs, ss, out):  # pragma: no
             c, sn = c * cs - sn * ss, sn * cs + c * ss
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _journal(Q, j, brg, b):  # pragma: no cover
+    """Bearing ``b``'s journal DOFs, housing DOFs (-1: the frame), contact stiffness,
+    clearance and the journal's displacement in its bearing at instant ``j``."""
+    ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
+    kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
+    hx, hy = int(brg[11 + 2 * b]), int(brg[12 + 2 * b])
+    x, y = Q[j, ix], Q[j, iy]
+    if hx >= 0:
+        x -= Q[j, hx]
+        y -= Q[j, hy]
+    return ix, iy, hx, hy, kB, gamma, x, y
+
+
 @njit(nogil=True, cache=True)
 def forces(z, t, E, D, omega, fg, unb, brg, eparams, n_cage, Kb, want_tangents, Q, V, F,
            A, B):  # pragma: no cover
@@ -124,13 +138,7 @@ def forces(z, t, E, D, omega, fg, unb, brg, eparams, n_cage, Kb, want_tangents, 
                     A[j, i, k] = Kb[i, k]
                     B[j, i, k] = 0.0
         for b in range(2):
-            ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
-            kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
-            hx, hy = int(brg[11 + 2 * b]), int(brg[12 + 2 * b])
-            x, y = Q[j, ix], Q[j, iy]
-            if hx >= 0:
-                x -= Q[j, hx]
-                y -= Q[j, hy]
+            ix, iy, hx, hy, kB, gamma, x, y = _journal(Q, j, brg, b)
             _bearing_mean(x, y, kB, gamma, expo, nb, n_cage, cs, ss, kb)
             F[j, ix] += kb[0]
             F[j, iy] += kb[1]
@@ -519,13 +527,7 @@ def cage_forces(Q, brg, n_cage):  # pragma: no cover
     out = np.empty((N, n_cage, 2, 2))
     for j in range(N):
         for b in range(2):
-            ix, iy = int(brg[5 + 2 * b]), int(brg[6 + 2 * b])
-            kB, gamma = (brg[0], brg[1]) if b == 0 else (brg[9], brg[10])
-            hx, hy = int(brg[11 + 2 * b]), int(brg[12 + 2 * b])
-            x, y = Q[j, ix], Q[j, iy]
-            if hx >= 0:
-                x -= Q[j, hx]
-                y -= Q[j, hy]
+            ix, iy, hx, hy, kB, gamma, x, y = _journal(Q, j, brg, b)
             for s in range(n_cage):
                 th = 2.0 * math.pi * s / (nb * n_cage)
                 out[j, s, b, 0], out[j, s, b, 1] = bearing_force_at(
