@@ -167,23 +167,22 @@ def forces(z, t, E, D, omega, fg, unb, brg, eparams, n_cage, Kb, want_tangents, 
             for i in range(n):
                 F[j, i] += f0[i]
             if want_tangents:
-                for k in range(n):
-                    h = 1e-10 + 1e-7 * abs(qp[k])
-                    qp[k] += h
-                    for i in range(n):
-                        f1[i] = 0.0
-                    builtin_forces(t[j], phi, omega, 0.0, qp, vp, eparams, f1)
-                    qp[k] = Q[j, k]
-                    for i in range(n):
-                        A[j, i, k] += (f1[i] - f0[i]) / h
-                    h = 1e-8 + 1e-7 * abs(vp[k])
-                    vp[k] += h
-                    for i in range(n):
-                        f1[i] = 0.0
-                    builtin_forces(t[j], phi, omega, 0.0, qp, vp, eparams, f1)
-                    vp[k] = V[j, k]
-                    for i in range(n):
-                        B[j, i, k] += (f1[i] - f0[i]) / h
+                # forward differences in each displacement (into A), then each velocity
+                # (into B); the floors are a displacement's and a velocity's roundoff
+                for which in range(2):
+                    x = qp if which == 0 else vp
+                    T = A if which == 0 else B
+                    floor = 1e-10 if which == 0 else 1e-8
+                    for k in range(n):
+                        held = x[k]
+                        h = floor + 1e-7 * abs(held)
+                        x[k] = held + h
+                        for i in range(n):
+                            f1[i] = 0.0
+                        builtin_forces(t[j], phi, omega, 0.0, qp, vp, eparams, f1)
+                        x[k] = held
+                        for i in range(n):
+                            T[j, i, k] += (f1[i] - f0[i]) / h
 
 
 @njit(nogil=True, cache=True)
@@ -423,12 +422,12 @@ def _step(R, L0, Lk, act, G, Minv, Mmat, x):  # pragma: no cover
 
 
 @njit(nogil=True, cache=True)
-def _imbalance(z, t, E, D, W, nu, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage, Kb,
+def _imbalance(z, t, E, D, W, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage, Kb,
                tangents, Q, V, F, A, B, R, scale):  # pragma: no cover
     """The forces (and, with ``tangents``, their tangents) at ``z``, the residual ``R``,
     and its largest entry over ``scale`` (inf where it is not finite)."""
     forces(z, t, E, D, omega, fg, unb, brg, eparams, n_cage, Kb, tangents, Q, V, F, A, B)
-    residual(z, nu, H, M, CG, K, F, E, W, R)
+    residual(z, omega, H, M, CG, K, F, E, W, R)
     worst = 0.0
     for r in range(R.shape[0]):
         a = abs(R[r])
@@ -464,18 +463,18 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
     L0, Lk = linear_inverses(omega, H, M, CG, K)
     z = z0.copy()
     it = 0
-    res = _imbalance(z, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg, eparams,
+    res = _imbalance(z, t, E, D, W, H, omega, M, CG, K, fg, unb, brg, eparams,
                      n_cage, Kb, False, Q, V, F, A, B, R, scale)
     none = np.empty((0, 0))
     if Minv0.shape[0] > 0:
         while res > tol and it < max_iter:
             _step(R, L0, Lk, act0, G0, Minv0, none, x)
             trial = z - x
-            new = _imbalance(trial, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg,
+            new = _imbalance(trial, t, E, D, W, H, omega, M, CG, K, fg, unb, brg,
                              eparams, n_cage, Kb, False, Q, V, F, A, B, R, scale)
             it += 1
             if not new < CHORD_RATE * res:
-                res = _imbalance(z, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg,
+                res = _imbalance(z, t, E, D, W, H, omega, M, CG, K, fg, unb, brg,
                                  eparams, n_cage, Kb, False, Q, V, F, A, B, R, scale)
                 break
             z = trial
@@ -485,7 +484,7 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
     act = act0
     G = G0
     while res > tol and it < max_iter:
-        _imbalance(z, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage,
+        _imbalance(z, t, E, D, W, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage,
                    Kb, True, Q, V, F, A, B, R, scale)
         act = active_dofs(A, B)
         G = coupling(act, A, B, E, D, W)
@@ -495,7 +494,7 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
         trial = z
         for _ in range(8):
             trial = z - x
-            new = _imbalance(trial, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg,
+            new = _imbalance(trial, t, E, D, W, H, omega, M, CG, K, fg, unb, brg,
                              eparams, n_cage, Kb, False, Q, V, F, A, B, R, scale)
             if new < res:
                 break
@@ -508,7 +507,7 @@ def solve(z0, act0, G0, Minv0, t, E, D, W, omega, M, CG, K, fg, unb, brg, eparam
         res = new
     status = 0 if res <= tol else 2
     if keep and status == 0:
-        _imbalance(z, t, E, D, W, omega, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage,
+        _imbalance(z, t, E, D, W, H, omega, M, CG, K, fg, unb, brg, eparams, n_cage,
                    Kb, True, Q, V, F, A, B, R, scale)
         act = active_dofs(A, B)
         G = coupling(act, A, B, E, D, W)
